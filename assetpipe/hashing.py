@@ -1,0 +1,42 @@
+"""Content digests: xxh3-128, written as ``"xxh3:<32 hex>"``.
+
+xxh3-128 was measured at 28 GB/s in memory on this kind of machine, against 1.8 GB/s for
+sha256 (../shared/NOTES-measurements.md); it is not a cryptographic hash, which a build cache
+does not need (the store verifies content on read, it does not defend against an attacker).
+
+This module imports only ``xxhash`` and the standard library: the no-op build path uses it
+and must not pay for numpy.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import xxhash
+
+PREFIX = "xxh3:"
+_CHUNK = 1 << 20
+
+
+def digest_bytes(data: bytes | bytearray | memoryview) -> str:
+    return PREFIX + xxhash.xxh3_128_hexdigest(data)
+
+
+def digest_file(path: str | Path) -> str:
+    """Digest of a file's content, read in 1 MiB chunks (constant memory)."""
+    h = xxhash.xxh3_128()
+    with open(path, "rb") as f:
+        while chunk := f.read(_CHUNK):
+            h.update(chunk)
+    return PREFIX + h.hexdigest()
+
+
+def canonical_json(value) -> bytes:
+    """The canonical form used in keys: sorted keys, no spaces, floats by repr (round-trip)."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
+                      allow_nan=False).encode("utf-8")
+
+
+def digest_json(value) -> str:
+    return digest_bytes(canonical_json(value))

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Set up assetpipe on a fresh Debian 12 machine (Python 3.11):
+#   - Debian packages: Mesa lavapipe, the Vulkan loader, validation layers, glslang, spirv-tools,
+#     and python3-venv (only what is missing; needs root or sudo);
+#   - a virtual environment in .venv with assetpipe installed editable, with its test extras.
+# Idempotent: a second run installs nothing new.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+DEB_PKGS="mesa-vulkan-drivers libvulkan1 vulkan-validationlayers glslang-tools spirv-tools python3-venv python3-dev g++"
+missing=""
+for p in $DEB_PKGS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  echo "setup: installing Debian packages:$missing"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
+fi
+
+PY="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  "$PY" -m venv .venv
+fi
+# Reinstall only when pyproject.toml changed since the last successful install.
+stamp=.venv/.assetpipe-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e ".[test]"
+  touch "$stamp"
+fi
