@@ -1,0 +1,68 @@
+"""Finding model files under the inputs, and giving each a unique id."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from assetpipe.errors import ConfigError
+
+MODEL_SUFFIXES = (".gltf", ".glb", ".obj")
+
+
+def discover_inputs(inputs: list[str | Path]) -> list[Path]:
+    """Model files named or found (recursively, sorted) under named folders; no duplicates."""
+    found: list[Path] = []
+    for raw in inputs:
+        p = Path(raw)
+        if p.is_dir():
+            found.extend(sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in MODEL_SUFFIXES))
+        elif p.is_file():
+            if p.suffix.lower() not in MODEL_SUFFIXES:
+                raise ConfigError(f"{p}: not a model file (expected {', '.join(MODEL_SUFFIXES)})")
+            found.append(p)
+        else:
+            raise ConfigError(f"{p}: no such file or folder")
+    seen, out = set(), []
+    for f in found:
+        key = f.resolve()
+        if key not in seen:
+            seen.add(key)
+            out.append(f)
+    return out
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def assign_ids(sources: list[Path]) -> dict[Path, str]:
+    """A unique, file-name-safe id per source: its stem, qualified by parent folders on clashes.
+
+    Deterministic for a given set of inputs: ``a/Box.gltf`` and ``b/Box.gltf`` become
+    ``a_Box`` and ``b_Box``.
+    """
+    def candidate(p: Path, depth: int) -> str:
+        parts = [*p.resolve().parent.parts[len(p.resolve().parent.parts) - depth:], p.stem] if depth else [p.stem]
+        return _UNSAFE.sub("_", "_".join(parts)).strip("_") or "model"
+
+    depth = {p: 0 for p in sources}
+    while True:
+        ids = {p: candidate(p, depth[p]) for p in sources}
+        clashes: dict[str, list[Path]] = {}
+        for p, i in ids.items():
+            clashes.setdefault(i.lower(), []).append(p)
+        dup = [ps for ps in clashes.values() if len(ps) > 1]
+        if not dup:
+            return ids
+        progressed = False
+        for ps in dup:
+            for p in ps:
+                if depth[p] < len(p.resolve().parent.parts):
+                    depth[p] += 1
+                    progressed = True
+        if not progressed:  # identical paths cannot happen (deduplicated); be safe anyway
+            for n, p in enumerate(sorted(sources)):
+                ids[p] = f"{ids[p]}_{n}"
+            return ids
+
+

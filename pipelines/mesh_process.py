@@ -1,0 +1,241 @@
+"""Mesh processing: the seed generator's Assimp flags, done with numpy and meshoptimizer.
+
+``process_mesh(mesh, material, options) -> ProcessedMesh``
+
+1. choose the vertex attributes the layout needs (the seed layout: position + the UV set the
+   base colour texture samples); missing UVs are zero-filled as the seed does;
+2. sanitise non-finite UVs / normals (set to 0, counted in a warning);
+3. join identical vertices (exact equality of every kept attribute, like
+   ``aiProcess_JoinIdenticalVertices``);
+4. drop degenerate triangles: a repeated index, or zero area (measured in float64 in a local
+   frame, relative to the mesh size);
+5. generate smooth normals where the layout needs them and the source has none, and tangents
+   where the layout carries them (``aiProcess_GenSmoothNormals`` / ``aiProcess_CalcTangentSpace``);
+6. vertex cache then vertex fetch optimisation (meshoptimizer), which also drops unreferenced
+   vertices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipelines.model import MeshData, Material
+
+MESH_STEP_VERSION = 1
+
+# Attribute names a layout may list, with their float32 component counts.
+ATTRIBUTE_COMPONENTS = {"position": 3, "uv0": 2, "normal": 3, "tangent": 4, "uv1": 2, "color": 4}
+SEED_LAYOUT = ("position", "uv0")
+
+
+@dataclass(frozen=True)
+class MeshOptions:
+    """Options of the mesh-processing step (defaults are the seed format's)."""
+
+    layout: tuple[str, ...] = SEED_LAYOUT
+    weld: bool = True
+    drop_degenerate: bool = True
+    optimize: bool = True
+    # a triangle whose doubled area is below this fraction of the squared bounding diagonal is
+    # degenerate (zero area up to float rounding)
+    degenerate_area_tolerance: float = 1e-14
+
+    def __post_init__(self):
+        unknown = [a for a in self.layout if a not in ATTRIBUTE_COMPONENTS]
+        if unknown or not self.layout or self.layout[0] != "position":
+            raise ValueError(f"layout must start with 'position' and use {sorted(ATTRIBUTE_COMPONENTS)}; got {self.layout}")
+
+    @property
+    def stride(self) -> int:
+        return 4 * sum(ATTRIBUTE_COMPONENTS[a] for a in self.layout)
+
+
+DEFAULT_MESH_OPTIONS = MeshOptions()
+
+
+@dataclass(frozen=True, eq=False)
+class ProcessedMesh:
+    """A mesh ready for LODs and writing.
+
+    ``vertices`` (N, C) float64: the layout's attributes side by side, in layout order
+    (position first; C = stride / 4). ``indices`` (M, 3) uint32, each < N.
+    """
+
+    name: str
+    material: int
+    vertices: np.ndarray
+    indices: np.ndarray
+    degenerate_dropped: int = 0
+    welded: int = 0
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.vertices[:, :3]
+
+
+def _uv_sets(mesh: MeshData, material: Material | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(uv for the seed slot, the other set): the slot gets the set the base colour samples."""
+    tex = material.base_color_texture if material is not None else None
+    if tex is not None and tex.tex_coord == 1 and mesh.uv1 is not None:
+        return mesh.uv1, mesh.uv0
+    return mesh.uv0, mesh.uv1
+
+
+def process_mesh(mesh: MeshData, material: Material | None = None,
+                 options: MeshOptions = DEFAULT_MESH_OPTIONS) -> ProcessedMesh:
+    warnings: list[str] = []
+    pos = np.asarray(mesh.positions, dtype=np.float64)
+    n = pos.shape[0]
+    tris = np.asarray(mesh.indices, dtype=np.uint32).reshape(-1, 3)
+    uv_a, uv_b = _uv_sets(mesh, material)
+    provided = {"position": pos, "uv0": uv_a, "uv1": uv_b, "normal": mesh.normals,
+                "tangent": mesh.tangents, "color": mesh.colors}
+
+    # 4 (first half). degenerate by repeated index: cheap, before anything else
+    degenerate = 0
+    if options.drop_degenerate and tris.shape[0]:
+        rep = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
+        area_bad = _zero_area(pos, tris, options.degenerate_area_tolerance)
+        bad = rep | area_bad
+        degenerate = int(bad.sum())
+        tris = tris[~bad]
+
+    columns = []
+    for name in options.layout:
+        k = ATTRIBUTE_COMPONENTS[name]
+        arr = provided.get(name)
+        if name == "normal" and arr is None:
+            arr = smooth_normals(pos, tris)
+        elif name == "tangent" and arr is None:
+            normals = provided["normal"] if provided["normal"] is not None else smooth_normals(pos, tris)
+            arr = tangents_from_uv(pos, tris, normals, uv_a)
+            if uv_a is None:
+                warnings.append(f"{mesh.name}: tangents requested without UVs; an arbitrary tangent frame was generated")
+        elif arr is None:
+            arr = np.ones((n, k)) if name == "color" else np.zeros((n, k))
+        arr = np.asarray(arr, dtype=np.float64).reshape(n, -1)[:, :k]
+        if name != "position":
+            bad = ~np.isfinite(arr)
+            if bad.any():
+                warnings.append(f"{mesh.name}: {int(bad.any(axis=1).sum())} non-finite {name} values replaced by 0")
+                arr = np.where(bad, 0.0, arr)
+        columns.append(arr)
+    verts = np.hstack(columns) if columns else pos.copy()
+
+    welded = 0
+    if options.weld and n:
+        verts, tris, welded = weld_vertices(verts, tris)
+
+    if options.optimize and tris.shape[0]:
+        verts, tris = optimize_order(verts, tris)
+    else:
+        verts, tris = compact(verts, tris)
+    return ProcessedMesh(name=mesh.name, material=mesh.material, vertices=verts, indices=tris,
+                         degenerate_dropped=degenerate, welded=welded, warnings=tuple(warnings))
+
+
+def _zero_area(pos: np.ndarray, tris: np.ndarray, tolerance: float) -> np.ndarray:
+    """(M,) bool: triangles whose area is zero relative to the mesh's size (float64, centred)."""
+    if tris.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    local = pos - (lo + hi) * 0.5
+    diag2 = float(np.sum((hi - lo) ** 2))
+    a, b, c = local[tris[:, 0]], local[tris[:, 1]], local[tris[:, 2]]
+    cross = np.cross(b - a, c - a)
+    area2 = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    if diag2 == 0.0:
+        return np.ones(tris.shape[0], dtype=bool)
+    return area2 <= tolerance * diag2
+
+
+def weld_vertices(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Join vertices whose every component is bit-identical; keeps first-occurrence order."""
+    n = verts.shape[0]
+    v = np.ascontiguousarray(verts)
+    v = np.where(v == 0.0, 0.0, v)  # -0.0 and 0.0 are the same vertex
+    rows = v.view(np.dtype((np.void, v.dtype.itemsize * v.shape[1]))).reshape(n)
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # unique ids in first-occurrence order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    remap = rank[inverse.reshape(-1)]
+    return verts[first[order]], remap[tris].astype(np.uint32), n - order.size
+
+
+def compact(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop unreferenced vertices, keeping order."""
+    used = np.zeros(verts.shape[0], dtype=bool)
+    used[tris.reshape(-1)] = True
+    if used.all():
+        return verts, tris
+    remap = np.cumsum(used) - 1
+    return verts[used], remap[tris].astype(np.uint32)
+
+
+def optimize_order(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """meshoptimizer's vertex cache optimisation, then vertex fetch reordering (and compaction)."""
+    import meshoptimizer
+
+    n = verts.shape[0]
+    flat = np.ascontiguousarray(tris.reshape(-1), dtype=np.uint32)
+    cache_opt = np.empty_like(flat)
+    meshoptimizer.optimize_vertex_cache(cache_opt, flat, flat.size, n)
+    remap = np.empty(n, dtype=np.uint32)
+    unique = meshoptimizer.optimize_vertex_fetch_remap(remap, cache_opt, cache_opt.size, n)
+    # remap[i] = new position of old vertex i (0xFFFFFFFF for unreferenced ones)
+    used = remap != np.uint32(0xFFFFFFFF)
+    out = np.empty((unique, verts.shape[1]), dtype=verts.dtype)
+    out[remap[used]] = verts[used]
+    return out, remap[cache_opt].reshape(-1, 3).astype(np.uint32)
+
+
+def smooth_normals(pos: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 area-weighted vertex normals, shared across vertices at one position."""
+    n = pos.shape[0]
+    if tris.shape[0] == 0:
+        return np.tile([0.0, 0.0, 1.0], (n, 1))
+    _, group = np.unique(pos, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
+    face = np.cross(b - a, c - a)  # length = 2 * area: area weighting for free
+    acc = np.zeros((group.max() + 1, 3))
+    for k in range(3):
+        np.add.at(acc, group[tris[:, k]], face)
+    out = acc[group]
+    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), np.array([0.0, 0.0, 1.0]))
+
+
+def tangents_from_uv(pos: np.ndarray, tris: np.ndarray, normals: np.ndarray,
+                     uv: np.ndarray | None) -> np.ndarray:
+    """(N, 4) float64 tangents (xyz unit, w = handedness) from UV gradients, Gram-Schmidt'd."""
+    n = pos.shape[0]
+    normals = np.asarray(normals, dtype=np.float64)
+    t_acc = np.zeros((n, 3))
+    b_acc = np.zeros((n, 3))
+    if uv is not None and tris.shape[0]:
+        uv = np.asarray(uv, dtype=np.float64)
+        p0, p1, p2 = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
+        w0, w1, w2 = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
+        e1, e2 = p1 - p0, p2 - p0
+        d1, d2 = w1 - w0, w2 - w0
+        det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+        r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1.0, det), 0.0)[:, None]
+        t = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
+        b = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
+        for k in range(3):
+            np.add.at(t_acc, tris[:, k], t)
+            np.add.at(b_acc, tris[:, k], b)
+    # Gram-Schmidt against the normal; fall back to any perpendicular where UVs say nothing
+    t = t_acc - normals * np.einsum("ij,ij->i", normals, t_acc)[:, None]
+    norm = np.linalg.norm(t, axis=1, keepdims=True)
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    fallback = np.cross(normals, helper)
+    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-30)
+    t = np.where(norm > 1e-20, t / np.maximum(norm, 1e-30), fallback)
+    w = np.where(np.einsum("ij,ij->i", np.cross(normals, t), b_acc) < 0.0, -1.0, 1.0)
+    return np.hstack([t, w[:, None]])
