@@ -1,0 +1,58 @@
+"""GLSL 450 -> SPIR-V with ``glslangValidator -V``, cached by the content digest of the source.
+
+The cache lives outside the repository: ``$XDG_CACHE_HOME/assetpipe/shaders`` by default, or
+a directory passed in. A cached module is named after the SHA-256 of (stage, source), so an
+edited shader is recompiled and an unchanged one never is.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from assetpipe.errors import RenderError
+
+from ._vk import INSTALL_HINT, cache_root
+
+SHADER_DIR = Path(__file__).resolve().parent / "shaders"
+
+
+def default_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/assetpipe/shaders`` (``~/.cache/...`` when unset)."""
+    return cache_root() / "shaders"
+
+
+def compile_glsl(source_path: Path, cache_dir: Path | None = None) -> bytes:
+    """The SPIR-V words of ``source_path`` (stage from its extension), compiled once per content."""
+    source = Path(source_path).read_bytes()
+    stage = Path(source_path).suffix.lstrip(".")
+    digest = hashlib.sha256(stage.encode() + b"\0" + source).hexdigest()
+    cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    cached = cache / f"{Path(source_path).stem}-{stage}-{digest[:32]}.spv"
+    if cached.is_file():
+        return cached.read_bytes()
+    tool = shutil.which("glslangValidator")
+    if tool is None:
+        raise RenderError(f"glslangValidator is not on PATH: {INSTALL_HINT}")
+    cache.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".spv", dir=cache)
+    os.close(fd)
+    try:
+        proc = subprocess.run([tool, "-V", "-S", stage, "-o", tmp, str(source_path)],
+                              capture_output=True, text=True, timeout=60)
+        if proc.returncode != 0:
+            raise RenderError(f"glslangValidator failed on {source_path}:\n{proc.stdout}{proc.stderr}")
+        os.replace(tmp, cached)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return cached.read_bytes()
+
+
+def shader_path(name: str) -> Path:
+    """The packaged shader ``renderer/shaders/<name>``."""
+    return SHADER_DIR / name

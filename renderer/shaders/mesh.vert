@@ -1,0 +1,23 @@
+#version 450
+// assetpipe validation renderer: positions are model space, the model matrix is identity.
+layout(location = 0) in vec3 inPos;
+layout(location = 1) in vec2 inUV;
+layout(location = 2) in vec4 inColor;
+
+layout(push_constant) uniform PushConstants {
+    mat4 viewProj;   // Vulkan clip space (y down, depth 0..1), column-major
+    vec4 eye;        // camera position (xyz)
+    vec4 lightDir;   // direction towards the light (xyz), model space
+    ivec4 sel;       // x material index, y texture slot, z mode (0 shaded, 1 silhouette), w unused
+} pc;
+
+layout(location = 0) out vec3 vPos;
+layout(location = 1) out vec2 vUV;
+layout(location = 2) out vec4 vColor;
+
+void main() {
+    vPos = inPos;
+    vUV = inUV;
+    vColor = inColor;
+    gl_Position = pc.viewProj * vec4(inPos, 1.0);
+}
