@@ -1,0 +1,359 @@
+"""A small, spec-checked KTX 2.0 writer and reader for uncompressed RGBA8 2D mip chains.
+
+Khronos KTX 2.0 file layout (all little-endian)::
+
+    identifier   12 bytes  «KTX 20»\\r\\n\\x1A\\n
+    header       9 x UInt32: vkFormat, typeSize, pixelWidth, pixelHeight, pixelDepth,
+                 layerCount, faceCount, levelCount, supercompressionScheme
+    index        UInt32 dfdByteOffset, dfdByteLength, kvdByteOffset, kvdByteLength,
+                 UInt64 sgdByteOffset, sgdByteLength
+    level index  levelCount x (UInt64 byteOffset, byteLength, uncompressedByteLength),
+                 entry 0 = level 0 (the largest)
+    DFD          UInt32 dfdTotalSize + one Basic Data Format Descriptor block
+    KVD          (UInt32 keyAndValueByteLength, key NUL value, padding to 4) x N, sorted by key
+    levels       stored smallest first (level levelCount-1 first), each preceded by
+                 mipPadding so its byteOffset is a multiple of lcm(texel block size, 4)
+
+What we write: 2D textures (pixelDepth 0, layerCount 0, faceCount 1), no supercompression,
+``VK_FORMAT_R8G8B8A8_SRGB`` (43) or ``VK_FORMAT_R8G8B8A8_UNORM`` (37), typeSize 1, a Basic
+DFD (colour model RGBSDA, primaries BT.709, transfer sRGB or linear, straight alpha, 4
+samples of 8 bits; the alpha sample of the sRGB format carries the LINEAR qualifier), and the
+key/values ``KTXorientation = "rd"`` (rows go down, columns right: row 0 is the top row as in
+glTF / Vulkan) and ``KTXwriter = "assetpipe"``.
+
+The reader accepts exactly that family (any key/values, other 8-bit RGBA vkFormats are not
+accepted) and validates every field and offset it reads; malformed data raises
+:class:`assetpipe.errors.InvalidTextureError` with the problem in one line.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from assetpipe.errors import InvalidTextureError
+
+KTX2_IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
+VK_FORMAT_R8G8B8A8_UNORM = 37
+VK_FORMAT_R8G8B8A8_SRGB = 43
+SUPPORTED_VK_FORMATS = (VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R8G8B8A8_SRGB)
+
+# Khronos Data Format Specification constants
+KHR_DF_VENDORID_KHRONOS = 0
+KHR_DF_KHR_DESCRIPTORTYPE_BASICFORMAT = 0
+KHR_DF_VERSIONNUMBER_1_3 = 2
+KHR_DF_MODEL_RGBSDA = 1
+KHR_DF_PRIMARIES_BT709 = 1
+KHR_DF_TRANSFER_LINEAR = 1
+KHR_DF_TRANSFER_SRGB = 2
+KHR_DF_FLAG_ALPHA_STRAIGHT = 0
+KHR_DF_CHANNEL_RGBSDA_RED, KHR_DF_CHANNEL_RGBSDA_GREEN, KHR_DF_CHANNEL_RGBSDA_BLUE = 0, 1, 2
+KHR_DF_CHANNEL_RGBSDA_ALPHA = 15
+KHR_DF_SAMPLE_DATATYPE_LINEAR = 0x10
+
+_HEADER = struct.Struct("<9I4I2Q")  # 36 + 16 + 16 = 68 bytes after the identifier
+_LEVEL = struct.Struct("<3Q")
+_HEADER_END = len(KTX2_IDENTIFIER) + _HEADER.size  # 80
+_TEXEL_BYTES = 4  # R8G8B8A8
+_LEVEL_ALIGN = _TEXEL_BYTES * 4 // math.gcd(_TEXEL_BYTES, 4)  # lcm(texel block size, 4) = 4
+_BASIC_BLOCK_HEADER = 24
+_SAMPLE_BYTES = 16
+WRITER = "assetpipe"
+
+
+@dataclass(frozen=True, eq=False)
+class Ktx2Image:
+    """What :func:`read_ktx2` found.
+
+    ``levels[k]``: ``(max(1, height >> k), max(1, width >> k), 4)`` uint8, level 0 first.
+    ``dfd``: the Basic DFD fields (``color_model``, ``color_primaries``, ``transfer_function``,
+    ``flags``, ``texel_block_dimension``, ``bytes_plane``, ``samples`` as tuples of
+    ``(bit_offset, bit_length, channel_type, sample_position, lower, upper)``).
+    ``kv``: key/value data; values are bytes with a trailing NUL stripped when present.
+    """
+
+    vk_format: int
+    width: int
+    height: int
+    levels: tuple[np.ndarray, ...]
+    dfd: dict = field(default_factory=dict)
+    kv: dict[str, bytes] = field(default_factory=dict)
+
+    @property
+    def srgb(self) -> bool:
+        return self.vk_format == VK_FORMAT_R8G8B8A8_SRGB
+
+
+def _pad(n: int, align: int) -> int:
+    return (-n) % align
+
+
+def _basic_dfd(vk_format: int) -> bytes:
+    """dfdTotalSize + the Basic DFD block for R8G8B8A8_{SRGB,UNORM}."""
+    srgb = vk_format == VK_FORMAT_R8G8B8A8_SRGB
+    n_samples = 4
+    block_size = _BASIC_BLOCK_HEADER + _SAMPLE_BYTES * n_samples
+    words = [
+        (KHR_DF_KHR_DESCRIPTORTYPE_BASICFORMAT << 17) | KHR_DF_VENDORID_KHRONOS,
+        (block_size << 16) | KHR_DF_VERSIONNUMBER_1_3,
+        KHR_DF_MODEL_RGBSDA | (KHR_DF_PRIMARIES_BT709 << 8)
+        | ((KHR_DF_TRANSFER_SRGB if srgb else KHR_DF_TRANSFER_LINEAR) << 16)
+        | (KHR_DF_FLAG_ALPHA_STRAIGHT << 24),
+        0,                 # texelBlockDimension0..3 = 0 (1x1x1x1)
+        _TEXEL_BYTES,      # bytesPlane0 = 4, bytesPlane1..3 = 0
+        0,                 # bytesPlane4..7 = 0
+    ]
+    channels = (KHR_DF_CHANNEL_RGBSDA_RED, KHR_DF_CHANNEL_RGBSDA_GREEN, KHR_DF_CHANNEL_RGBSDA_BLUE,
+                KHR_DF_CHANNEL_RGBSDA_ALPHA)
+    for i, ch in enumerate(channels):
+        ctype = ch | (KHR_DF_SAMPLE_DATATYPE_LINEAR if (srgb and ch == KHR_DF_CHANNEL_RGBSDA_ALPHA) else 0)
+        words += [(8 * i) | ((8 - 1) << 16) | (ctype << 24), 0, 0, 255]
+    block = struct.pack(f"<{len(words)}I", *words)
+    return struct.pack("<I", 4 + len(block)) + block
+
+
+def _kvd(entries: dict[str, bytes]) -> bytes:
+    out = bytearray()
+    for key in sorted(entries, key=lambda k: k.encode("utf-8")):
+        kv = key.encode("utf-8") + b"\x00" + entries[key]
+        out += struct.pack("<I", len(kv)) + kv + b"\x00" * _pad(len(kv), 4)
+    return bytes(out)
+
+
+def expected_level_shapes(width: int, height: int, count: int) -> list[tuple[int, int]]:
+    """``[(h, w), ...]`` of ``count`` levels below a ``width`` x ``height`` level 0."""
+    return [(max(1, height >> k), max(1, width >> k)) for k in range(count)]
+
+
+def write_ktx2(levels: Sequence[np.ndarray], vk_format: int, kv: dict[str, bytes] | None = None) -> bytes:
+    """Serialise a mip chain as KTX 2.0.
+
+    ``levels``: level 0 first, each ``(max(1, H >> k), max(1, W >> k), 4)`` uint8 RGBA rows
+    top to bottom; 1 to ``floor(log2(max(W, H))) + 1`` levels. ``vk_format``: 43 (sRGB) or
+    37 (UNORM). ``kv``: extra key/values (bytes values, written as given); the
+    ``KTXorientation`` and ``KTXwriter`` entries are always ours.
+    Deterministic: the same input gives the same bytes.
+    """
+    if vk_format not in SUPPORTED_VK_FORMATS:
+        raise ValueError(f"vk_format {vk_format} is not supported (37 or 43)")
+    if not levels:
+        raise ValueError("no levels")
+    first = levels[0]
+    if first.ndim != 3 or first.shape[2] != 4 or first.dtype != np.uint8:
+        raise ValueError(f"level 0 must be (H, W, 4) uint8, got {first.shape} {first.dtype}")
+    height, width = int(first.shape[0]), int(first.shape[1])
+    if width < 1 or height < 1:
+        raise ValueError("empty level 0")
+    max_levels = max(width, height).bit_length()
+    if len(levels) > max_levels:
+        raise ValueError(f"{len(levels)} levels for {width}x{height}: at most {max_levels}")
+    for k, (lv, shape) in enumerate(zip(levels, expected_level_shapes(width, height, len(levels)))):
+        if lv.shape != shape + (4,) or lv.dtype != np.uint8:
+            raise ValueError(f"level {k} is {lv.shape} {lv.dtype}, expected {shape + (4,)} uint8")
+
+    n = len(levels)
+    entries = dict(kv or {})
+    entries["KTXorientation"] = b"rd\x00"
+    entries["KTXwriter"] = WRITER.encode("utf-8") + b"\x00"
+    dfd = _basic_dfd(vk_format)
+    kvd = _kvd(entries)
+    level_index_end = _HEADER_END + _LEVEL.size * n
+    dfd_offset = level_index_end
+    kvd_offset = dfd_offset + len(dfd)
+    pos = kvd_offset + len(kvd)
+
+    offsets = [0] * n
+    chunks: list[bytes] = []
+    for k in range(n - 1, -1, -1):  # smallest level first in the file
+        padding = _pad(pos, _LEVEL_ALIGN)
+        chunks.append(b"\x00" * padding)
+        pos += padding
+        offsets[k] = pos
+        data = np.ascontiguousarray(levels[k]).tobytes()
+        chunks.append(data)
+        pos += len(data)
+
+    header = KTX2_IDENTIFIER + _HEADER.pack(
+        vk_format, 1, width, height, 0, 0, 1, n, 0,
+        dfd_offset, len(dfd), kvd_offset if kvd else 0, len(kvd), 0, 0)
+    index = b"".join(_LEVEL.pack(offsets[k], levels[k].nbytes, levels[k].nbytes) for k in range(n))
+    return b"".join([header, index, dfd, kvd] + chunks)
+
+
+# ----------------------------------------------------------------------------- reader
+
+def _bad(name: str, problem: str) -> InvalidTextureError:
+    return InvalidTextureError(name, f"invalid KTX2 file: {problem}")
+
+
+def read_ktx2(data: bytes, name: str = "<ktx2>") -> Ktx2Image:
+    """Parse and validate a KTX 2.0 file written as :func:`write_ktx2` writes them.
+
+    ``name`` names the file in errors. Raises :class:`InvalidTextureError` for anything
+    malformed (truncated, wrong identifier, unsupported header values, DFD not matching the
+    vkFormat, offsets out of range or misaligned or overlapping, levels not stored smallest
+    first, bad key/value data).
+    """
+    buf = memoryview(data)
+    size = len(buf)
+    if size < _HEADER_END:
+        raise _bad(name, f"{size} bytes is shorter than the 80-byte header")
+    if bytes(buf[:12]) != KTX2_IDENTIFIER:
+        raise _bad(name, "missing the KTX 2.0 identifier")
+    (vk_format, type_size, width, height, depth, layers, faces, level_count, scheme,
+     dfd_off, dfd_len, kvd_off, kvd_len, sgd_off, sgd_len) = _HEADER.unpack_from(buf, 12)
+    if vk_format not in SUPPORTED_VK_FORMATS:
+        raise _bad(name, f"vkFormat {vk_format} is not supported (37 R8G8B8A8_UNORM or 43 R8G8B8A8_SRGB)")
+    if type_size != 1:
+        raise _bad(name, f"typeSize {type_size}, expected 1 for an 8-bit format")
+    if width == 0 or height == 0:
+        raise _bad(name, f"pixelWidth/pixelHeight {width}x{height}: a 2D texture needs both")
+    if depth != 0 or layers != 0 or faces != 1:
+        raise _bad(name, f"pixelDepth {depth}, layerCount {layers}, faceCount {faces}: only 2D (0, 0, 1) is supported")
+    if scheme != 0:
+        raise _bad(name, f"supercompressionScheme {scheme} is not supported (0 only)")
+    max_levels = max(width, height).bit_length()
+    stored = max(level_count, 1)
+    if stored > max_levels:
+        raise _bad(name, f"levelCount {level_count} exceeds {max_levels} for {width}x{height}")
+    if sgd_off != 0 or sgd_len != 0:
+        raise _bad(name, "supercompression global data present without supercompression")
+    index_end = _HEADER_END + _LEVEL.size * stored
+    if index_end > size:
+        raise _bad(name, "truncated in the level index")
+
+    # DFD
+    if dfd_off != index_end:
+        raise _bad(name, f"dfdByteOffset {dfd_off}, expected {index_end} (right after the level index)")
+    if dfd_len < 4 or dfd_off + dfd_len > size:
+        raise _bad(name, f"DFD of {dfd_len} bytes at {dfd_off} exceeds the file ({size} bytes)")
+    dfd = _read_dfd(buf[dfd_off:dfd_off + dfd_len], vk_format, name)
+
+    # KVD
+    kv: dict[str, bytes] = {}
+    if kvd_len:
+        if kvd_off != dfd_off + dfd_len:
+            raise _bad(name, f"kvdByteOffset {kvd_off}, expected {dfd_off + dfd_len} (right after the DFD)")
+        if kvd_off + kvd_len > size:
+            raise _bad(name, "truncated in the key/value data")
+        kv = _read_kvd(buf[kvd_off:kvd_off + kvd_len], name)
+    elif kvd_off != 0:
+        raise _bad(name, f"kvdByteOffset {kvd_off} with kvdByteLength 0")
+    data_start = (kvd_off + kvd_len) if kvd_len else dfd_off + dfd_len
+
+    # levels
+    shapes = expected_level_shapes(width, height, stored)
+    entries = [_LEVEL.unpack_from(buf, _HEADER_END + _LEVEL.size * k) for k in range(stored)]
+    levels = []
+    for k in range(stored - 1, -1, -1):  # file order: smallest first
+        off, length, ulength = entries[k]
+        h, w = shapes[k]
+        expected = h * w * _TEXEL_BYTES
+        if length != expected:
+            raise _bad(name, f"level {k} byteLength {length}, expected {expected} for {w}x{h} RGBA8")
+        if ulength != length:
+            raise _bad(name, f"level {k} uncompressedByteLength {ulength} differs from byteLength {length}")
+        if off % _LEVEL_ALIGN:
+            raise _bad(name, f"level {k} byteOffset {off} is not a multiple of {_LEVEL_ALIGN}")
+        if off < data_start or off + length > size:
+            raise _bad(name, f"level {k} data [{off}, {off + length}) lies outside the file's level data "
+                             f"[{data_start}, {size})")
+        data_start = off + length  # the next (larger) level must follow: smallest first, no overlap
+        levels.append(np.frombuffer(buf, dtype=np.uint8, count=length, offset=off).reshape(h, w, 4).copy())
+    if data_start != size:
+        raise _bad(name, f"{size - data_start} unexpected bytes after level 0")
+    levels.reverse()
+    return Ktx2Image(vk_format=vk_format, width=width, height=height, levels=tuple(levels), dfd=dfd, kv=kv)
+
+
+def _read_dfd(b: memoryview, vk_format: int, name: str) -> dict:
+    total = struct.unpack_from("<I", b, 0)[0]
+    if total != len(b):
+        raise _bad(name, f"dfdTotalSize {total} differs from dfdByteLength {len(b)}")
+    if len(b) < 4 + _BASIC_BLOCK_HEADER:
+        raise _bad(name, "DFD too short for a basic descriptor block")
+    w0, w1, w2, w3, w4, w5 = struct.unpack_from("<6I", b, 4)
+    vendor, dtype = w0 & 0x1FFFF, w0 >> 17
+    version, block_size = w1 & 0xFFFF, w1 >> 16
+    if vendor != KHR_DF_VENDORID_KHRONOS or dtype != KHR_DF_KHR_DESCRIPTORTYPE_BASICFORMAT:
+        raise _bad(name, f"DFD block is vendor {vendor} type {dtype}, expected a Khronos basic block (0, 0)")
+    if version != KHR_DF_VERSIONNUMBER_1_3:
+        raise _bad(name, f"DFD versionNumber {version}, expected 2")
+    if block_size < _BASIC_BLOCK_HEADER or (block_size - _BASIC_BLOCK_HEADER) % _SAMPLE_BYTES \
+            or 4 + block_size != len(b):
+        raise _bad(name, f"DFD descriptorBlockSize {block_size} does not fit dfdByteLength {len(b)}")
+    model, primaries, transfer, flags = w2 & 0xFF, (w2 >> 8) & 0xFF, (w2 >> 16) & 0xFF, w2 >> 24
+    tbd = tuple((w3 >> (8 * i)) & 0xFF for i in range(4))
+    planes = tuple((w4 >> (8 * i)) & 0xFF for i in range(4)) + tuple((w5 >> (8 * i)) & 0xFF for i in range(4))
+    n_samples = (block_size - _BASIC_BLOCK_HEADER) // _SAMPLE_BYTES
+    samples = []
+    for i in range(n_samples):
+        s0, s1, lower, upper = struct.unpack_from("<4I", b, 4 + _BASIC_BLOCK_HEADER + _SAMPLE_BYTES * i)
+        samples.append((s0 & 0xFFFF, (s0 >> 16) & 0xFF, s0 >> 24,
+                        tuple((s1 >> (8 * j)) & 0xFF for j in range(4)), lower, upper))
+    dfd = {"color_model": model, "color_primaries": primaries, "transfer_function": transfer,
+           "flags": flags, "texel_block_dimension": tbd, "bytes_plane": planes,
+           "samples": tuple(samples)}
+    want = _read_dfd_expected(vk_format)
+    for key, value in want.items():
+        if dfd[key] != value:
+            raise _bad(name, f"DFD {key} is {dfd[key]}, expected {value} for vkFormat {vk_format}")
+    return dfd
+
+
+_EXPECTED_DFD: dict[int, dict] = {}
+
+
+def _read_dfd_expected(vk_format: int) -> dict:
+    """The DFD fields :func:`_basic_dfd` writes for ``vk_format`` (parsed back, cached)."""
+    if vk_format not in _EXPECTED_DFD:
+        raw = _basic_dfd(vk_format)
+        w2, w3, w4, w5 = struct.unpack_from("<4I", raw, 12)
+        samples = []
+        for i in range(4):
+            s0, s1, lower, upper = struct.unpack_from("<4I", raw, 28 + 16 * i)
+            samples.append((s0 & 0xFFFF, (s0 >> 16) & 0xFF, s0 >> 24,
+                            tuple((s1 >> (8 * j)) & 0xFF for j in range(4)), lower, upper))
+        _EXPECTED_DFD[vk_format] = {
+            "color_model": w2 & 0xFF, "color_primaries": (w2 >> 8) & 0xFF,
+            "transfer_function": (w2 >> 16) & 0xFF, "flags": w2 >> 24,
+            "texel_block_dimension": (0, 0, 0, 0), "bytes_plane": (4, 0, 0, 0, 0, 0, 0, 0),
+            "samples": tuple(samples)}
+    return _EXPECTED_DFD[vk_format]
+
+
+def _read_kvd(b: memoryview, name: str) -> dict[str, bytes]:
+    out: dict[str, bytes] = {}
+    pos, end = 0, len(b)
+    last_key: bytes | None = None
+    while pos < end:
+        if pos + 4 > end:
+            raise _bad(name, "truncated key/value length")
+        length = struct.unpack_from("<I", b, pos)[0]
+        pos += 4
+        if length == 0 or pos + length > end:
+            raise _bad(name, f"key/value entry of {length} bytes overruns the key/value data")
+        entry = bytes(b[pos:pos + length])
+        nul = entry.find(b"\x00")
+        if nul <= 0:
+            raise _bad(name, "key/value entry without a NUL-terminated key")
+        key_bytes = entry[:nul]
+        try:
+            key = key_bytes.decode("utf-8")
+        except UnicodeDecodeError:
+            raise _bad(name, f"key {key_bytes!r} is not UTF-8") from None
+        if last_key is not None and key_bytes <= last_key:
+            raise _bad(name, f"key/value entries not sorted or repeated at {key!r}")
+        last_key = key_bytes
+        value = entry[nul + 1:]
+        if key.startswith("KTX") and value.endswith(b"\x00"):
+            value = value[:-1]
+        out[key] = value
+        pos += length + _pad(length, 4)
+    if pos != end:
+        raise _bad(name, "key/value data padding overruns kvdByteLength")
+    return out

@@ -1,0 +1,177 @@
+"""Decoding encoded images (PNG, JPEG, TGA, BMP, and GIF/WebP) into RGBA pixel arrays.
+
+Pure functions: bytes in, numpy arrays out, no file I/O.
+
+Output convention
+-----------------
+:func:`decode_image` returns a C-contiguous array of shape ``(H, W, 4)``, channels R, G, B, A,
+row 0 the top row of the image (glTF / Vulkan convention):
+
+* ``uint8`` for every 8-bit-or-less source (palette with or without transparency, grey,
+  grey+alpha, RGB, RGBA, CMYK JPEG, 16-bit-per-pixel TGA/BMP, ...);
+* ``uint16`` (0..65535) for PNGs stored with 16 bits per channel (grey, grey+alpha, RGB,
+  RGBA), which are decoded with OpenCV because Pillow truncates 16-bit colour PNGs to 8 bits.
+
+Missing alpha is filled with the maximum value (255 or 65535). Colour-key transparency
+(``tRNS`` on grey / RGB PNGs, palette ``tRNS``) becomes alpha for 8-bit sources; a colour key
+on a 16-bit PNG is ignored (OpenCV does not apply it). Embedded ICC profiles and gAMA chunks
+are ignored: glTF defines texture colour spaces by role, not by image metadata.
+
+EXIF orientation is **ignored** (glTF 2.0: "the image's orientation... must be ignored";
+texture coordinates address the stored pixel rows).
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+import warnings
+
+import cv2
+import numpy as np
+from PIL import Image
+
+from assetpipe.errors import InvalidTextureError
+from pipelines.model import ImageSource
+
+# 16384 x 16384 (Vulkan's common maxImageDimension2D, squared): 1 GiB as RGBA8 already.
+DEFAULT_MAX_PIXELS = 16384 * 16384
+
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+# Formats Pillow may identify that we accept (glTF core needs PNG and JPEG; OBJ/MTL files in
+# the wild also use TGA and BMP; GIF/WebP are sniffed by pipelines.image_source).
+_ACCEPTED_FORMATS = frozenset({"PNG", "JPEG", "MPO", "TGA", "BMP", "DIB", "GIF", "WEBP"})
+_PIL_FORMAT_HINT = {
+    "image/png": ["PNG"], "image/jpeg": ["JPEG", "MPO"], "image/bmp": ["BMP", "DIB"],
+    "image/x-tga": ["TGA"], "image/tga": ["TGA"], "image/gif": ["GIF"], "image/webp": ["WEBP"],
+}
+
+
+def _where(image: ImageSource) -> str:
+    return image.origin or image.name
+
+
+def _png_ihdr(data: bytes) -> tuple[int, int, int, int] | None:
+    """``(width, height, bit_depth, colour_type)`` from a PNG's IHDR, or None if not a PNG."""
+    if not data.startswith(_PNG_MAGIC) or len(data) < 33 or data[12:16] != b"IHDR":
+        return None
+    width, height, depth, colour_type = struct.unpack(">IIBB", data[16:26])
+    return width, height, depth, colour_type
+
+
+def _check_size(image: ImageSource, width: int, height: int, max_pixels: int) -> None:
+    if width <= 0 or height <= 0:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} has an empty size {width}x{height}")
+    if width * height > max_pixels:
+        raise InvalidTextureError(
+            _where(image),
+            f"image {image.name!r} is {width}x{height} = {width * height} pixels, over the limit of {max_pixels}")
+
+
+def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
+    """A 16-bit PNG via OpenCV (IMREAD_UNCHANGED keeps 16 bits and ignores EXIF)."""
+    buf = np.frombuffer(image.data, dtype=np.uint8)
+    try:
+        arr = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    except cv2.error as exc:  # pragma: no cover - OpenCV raises rarely, returns None mostly
+        raise InvalidTextureError(_where(image), f"image {image.name!r} cannot be decoded: {exc}") from None
+    if arr is None:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated 16-bit PNG")
+    if arr.dtype != np.uint16:  # OpenCV chose 8 bits after all: widen exactly
+        arr = arr.astype(np.uint16) * 257
+    h, w = arr.shape[:2]
+    _check_size(image, w, h, max_pixels)
+    out = np.empty((h, w, 4), dtype=np.uint16)
+    if arr.ndim == 2:
+        out[..., :3] = arr[..., None]
+        out[..., 3] = 65535
+    elif arr.shape[2] == 2:  # grey + alpha (some OpenCV builds)
+        out[..., :3] = arr[..., :1]
+        out[..., 3] = arr[..., 1]
+    elif arr.shape[2] == 3:
+        out[..., :3] = arr[..., ::-1]
+        out[..., 3] = 65535
+    elif arr.shape[2] == 4:
+        out[..., :3] = arr[..., 2::-1]
+        out[..., 3] = arr[..., 3]
+    else:  # pragma: no cover
+        raise InvalidTextureError(_where(image), f"image {image.name!r} has {arr.shape[2]} channels")
+    return out
+
+
+def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray:
+    """Decode ``image.data`` into RGBA pixels.
+
+    Returns ``(H, W, 4)`` ``uint8``, or ``(H, W, 4)`` ``uint16`` for 16-bit-per-channel PNGs
+    (see the module docstring). EXIF orientation is ignored.
+
+    Raises :class:`InvalidTextureError` (naming ``image.origin``) when the bytes are not a
+    decodable image of an accepted format, are truncated, or hold more than ``max_pixels``
+    pixels (checked from the header, before the pixels are decoded: a decompression bomb is
+    refused without allocating its pixels).
+    """
+    data = image.data
+    ihdr = _png_ihdr(data)
+    if ihdr is not None:
+        _check_size(image, ihdr[0], ihdr[1], max_pixels)
+        if ihdr[2] == 16:
+            return _decode_png16(image, max_pixels)
+    formats = _PIL_FORMAT_HINT.get(image.mime)
+    try:
+        with warnings.catch_warnings():
+            # Our own max_pixels bound replaces Pillow's global bomb check.
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(io.BytesIO(data), formats=formats)
+            if im.format not in _ACCEPTED_FORMATS:
+                raise InvalidTextureError(_where(image), f"image {image.name!r} is a {im.format} image, not a supported format")
+            _check_size(image, im.width, im.height, max_pixels)
+            im.load()
+            rgba = _to_rgba(im)
+    except InvalidTextureError:
+        raise
+    except Image.DecompressionBombError as exc:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is too large: {exc}") from None
+    except (OSError, ValueError, SyntaxError, EOFError, struct.error, IndexError, TypeError,
+            MemoryError, Image.UnidentifiedImageError) as exc:
+        problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InvalidTextureError(_where(image), f"image {image.name!r} cannot be decoded: {problem}") from None
+    return rgba
+
+
+def _to_rgba(im: Image.Image) -> np.ndarray:
+    """Any Pillow mode to ``(H, W, 4)`` uint8 RGBA, honouring palette / colour-key transparency."""
+    mode = im.mode
+    if mode == "RGBA":
+        rgba = im
+    elif mode in ("RGBa", "La"):  # premultiplied modes (rare in files): un-premultiply
+        rgba = im.convert("RGBA")
+    elif mode in ("P", "PA", "L", "LA", "RGB", "1"):
+        # Pillow applies palette tRNS and grey / RGB colour keys (info["transparency"]).
+        rgba = im.convert("RGBA")
+    elif mode in ("I;16", "I;16B", "I;16L", "I", "F"):
+        # 16-bit grey from a non-PNG container (PNGs take the OpenCV path): keep 8 bits.
+        arr = np.asarray(im, dtype=np.float64)
+        scale = 255.0 / 65535.0 if mode.startswith("I") else 255.0
+        grey = np.clip(np.rint(arr * scale), 0, 255).astype(np.uint8)
+        out = np.empty(grey.shape + (4,), dtype=np.uint8)
+        out[..., :3] = grey[..., None]
+        out[..., 3] = 255
+        return out
+    else:  # CMYK, YCbCr, LAB, HSV, ...
+        rgba = im.convert("RGB").convert("RGBA")
+    arr = np.asarray(rgba, dtype=np.uint8)
+    if arr.ndim != 3 or arr.shape[2] != 4:  # pragma: no cover - defensive
+        raise ValueError(f"unexpected decoded shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
+def has_alpha_below_255(rgba: np.ndarray) -> bool:
+    """True if any texel's alpha is below the maximum (255 for uint8, 65535 for uint16).
+
+    ``rgba``: ``(H, W, 4)`` uint8 or uint16.
+    """
+    top = 65535 if rgba.dtype == np.uint16 else 255
+    alpha = rgba[..., 3]
+    if alpha.size == 0:
+        return False
+    return bool(alpha.min() < top)
