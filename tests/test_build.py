@@ -1,0 +1,137 @@
+"""End-to-end builds through the CLI on small real models: the seed contract, the report,
+determinism, and failure isolation."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from assetpipe.cli import main
+from seed_loader import load_seed_model
+
+
+def run_build(*args: str):
+    result = CliRunner().invoke(main, ["build", *args], catch_exceptions=False)
+    return result
+
+
+def test_box_textured_builds_in_the_seed_layout(corpus, tmp_path):
+    out = tmp_path / "out"
+    r = run_build(str(corpus / "models/BoxTextured/glTF/BoxTextured.gltf"), "-o", str(out),
+                  "--json", str(tmp_path / "report.json"))
+    assert r.exit_code == 0, r.output
+    model = load_seed_model(out / "BoxTextured.json")
+    assert [m.id for m in model.meshes] == ["mesh-0-0"]
+    mesh = model.meshes[0]
+    assert mesh.indices.shape == (12, 3)
+    assert int(mesh.indices.max()) < mesh.positions.shape[0]
+    # the glTF node rotates the box; the unit cube stays a unit cube (rotation by 90 degrees)
+    np.testing.assert_allclose(np.abs(mesh.positions).max(axis=0), [0.5, 0.5, 0.5], atol=1e-6)
+    assert model.materials[0]["texturePath"].startswith("textures/")
+    assert (out / model.materials[0]["texturePath"]).is_file()
+    report = json.loads((tmp_path / "report.json").read_text())
+    entry = report["assets"][0]
+    assert entry["status"] == "built" and entry["id"] == "BoxTextured" and entry["error"] is None
+    assert set(entry) >= {"source", "id", "status", "outputs", "warnings", "error", "seconds"}
+    assert sorted(Path(p).name for p in entry["outputs"]) == sorted(
+        ["BoxTextured.json", "BoxTextured-mat.json", "BoxTextured.asset.json"])
+
+
+def test_sidecar_describes_layout_bounds_and_lod0(corpus, tmp_path):
+    out = tmp_path / "out"
+    assert run_build(str(corpus / "models/Duck/glTF/Duck.gltf"), "-o", str(out)).exit_code == 0
+    side = json.loads((out / "Duck.asset.json").read_text())
+    seed = json.loads((out / "Duck.json").read_text())
+    assert side["formatVersion"] == 1
+    assert side["vertexLayout"] == {"stride": 20, "attributes": [
+        {"name": "position", "format": "float32x3", "offset": 0},
+        {"name": "uv0", "format": "float32x2", "offset": 12}]}
+    sm, m = side["meshes"][0], seed["meshes"][0]
+    assert (sm["lods"][0]["idxOffset"], sm["lods"][0]["idxSize"]) == (m["idxOffset"], m["idxSize"])
+    assert sm["vertexCount"] * 20 == m["vtxSize"] and sm["triangleCount"] * 12 == m["idxSize"]
+    # bounds equal the vertex data's
+    v = np.fromfile(out / "Duck.vtx", dtype="<f4").reshape(-1, 5)[:, :3]
+    np.testing.assert_allclose(sm["bounds"]["min"], v.min(axis=0), rtol=1e-6)
+    np.testing.assert_allclose(sm["bounds"]["max"], v.max(axis=0), rtol=1e-6)
+    assert side["sources"][0]["path"] == "Duck.gltf" and side["sources"][0]["digest"].startswith("xxh3:")
+    assert {s["path"] for s in side["sources"]} >= {"Duck0.bin", "DuckCM.png"}
+    mat = side["materials"][0]
+    assert mat["alphaMode"] == "OPAQUE" and mat["transparent"] is False
+    assert mat["textures"]["baseColor"]["levels"] == 10  # 512x512 -> 10 levels
+
+
+def test_outputs_are_byte_identical_across_runs(corpus, tmp_path):
+    src = str(corpus / "models/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf")
+    assert run_build(src, "-o", str(tmp_path / "a")).exit_code == 0
+    assert run_build(src, "-o", str(tmp_path / "b")).exit_code == 0
+    files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    files_b = sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*") if p.is_file())
+    assert files_a == files_b and files_a
+    for rel in files_a:
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+
+
+def test_points_and_lines_only_models_build_empty_with_a_warning(corpus, tmp_path):
+    out = tmp_path / "out"
+    r = run_build(str(corpus / "models/Mesh_PrimitiveMode"), "-o", str(out), "--json", str(tmp_path / "r.json"))
+    assert r.exit_code == 0, r.output
+    report = {a["id"]: a for a in json.loads((tmp_path / "r.json").read_text())["assets"]}
+    assert len(report) == 16
+    points = report["Mesh_PrimitiveMode_00"]
+    assert points["status"] == "built" and any("POINTS" in w for w in points["warnings"])
+    assert load_seed_model(out / "Mesh_PrimitiveMode_00.json").meshes == []
+    # strips and fans (with and without indices) give the two triangles of the quad
+    for i in (4, 5, 11, 12):
+        meshes = load_seed_model(out / f"Mesh_PrimitiveMode_{i:02d}.json").meshes
+        assert sum(m.indices.shape[0] for m in meshes) == 2, i
+
+
+def test_same_file_names_in_different_folders_get_distinct_ids(corpus, tmp_path):
+    out = tmp_path / "out"
+    r = run_build(str(corpus / "models/BoxTextured"), str(corpus / "models/BoxTextured-glTF-Embedded"),
+                  "-o", str(out), "--json", str(tmp_path / "r.json"))
+    assert r.exit_code == 0, r.output
+    ids = sorted(a["id"] for a in json.loads((tmp_path / "r.json").read_text())["assets"])
+    assert len(set(ids)) == 2 and all(i.endswith("BoxTextured") for i in ids)
+    for i in ids:
+        load_seed_model(out / f"{i}.json")
+
+
+def test_a_failed_rebuild_keeps_the_earlier_outputs(corpus, tmp_path):
+    src = tmp_path / "src"
+    shutil.copytree(corpus / "models/BoxTextured/glTF", src)
+    out = tmp_path / "out"
+    assert run_build(str(src / "BoxTextured.gltf"), "-o", str(out)).exit_code == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    (src / "BoxTextured0.bin").write_bytes(b"\0" * 10)  # truncated buffer
+    r = run_build(str(src / "BoxTextured.gltf"), "-o", str(out))
+    assert r.exit_code == 1
+    assert "BoxTextured.gltf" in r.output and "Traceback" not in r.output
+    after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert not list(out.rglob("*.tmp"))
+
+
+def test_cli_rejects_unknown_input_kinds(tmp_path):
+    (tmp_path / "notes.txt").write_text("hi")
+    r = run_build(str(tmp_path / "notes.txt"), "-o", str(tmp_path / "out"))
+    assert r.exit_code != 0 and "not a model file" in r.output
+    r = run_build(str(tmp_path / "missing.gltf"), "-o", str(tmp_path / "out"))
+    assert r.exit_code != 0 and "no such file" in r.output
+
+
+def test_inspect_reports_a_consistent_model_and_catches_corruption(corpus, tmp_path):
+    out = tmp_path / "out"
+    assert run_build(str(corpus / "models/Duck/glTF/Duck.gltf"), "-o", str(out)).exit_code == 0
+    r = CliRunner().invoke(main, ["inspect", str(out / "Duck.json")])
+    assert r.exit_code == 0 and "consistent: yes" in r.output and "4212 triangles" in r.output
+    idx = np.fromfile(out / "Duck.idx", dtype="<u4")
+    idx[5] = 10**6
+    idx.tofile(out / "Duck.idx")
+    r = CliRunner().invoke(main, ["inspect", str(out / "Duck.json")])
+    assert r.exit_code == 1 and "index 1000000" in r.output
