@@ -126,8 +126,11 @@ class AccessorReader:
         mode, filt = ext.get("mode", "ATTRIBUTES"), ext.get("filter", "NONE")
         try:
             if mode == "ATTRIBUTES":
-                out = meshoptimizer.decode_vertex_buffer(count, stride, src, dtype=np.uint8)
-                out = np.ascontiguousarray(out).reshape(-1)
+                # Without ``dtype`` the wrapper allocates count * stride bytes (returned as a
+                # float32 view); with dtype=np.uint8 it allocates only ``count`` bytes and the
+                # decoder writes past them.
+                out = meshoptimizer.decode_vertex_buffer(count, stride, src)
+                out = np.ascontiguousarray(out).view(np.uint8).reshape(-1)
                 if filt == "OCTAHEDRAL":
                     out = meshoptimizer.decode_filter_oct(out, count, stride)
                 elif filt == "QUATERNION":
@@ -144,9 +147,13 @@ class AccessorReader:
                 raise UnsupportedError(self.source, f"bufferView {index}: EXT_meshopt_compression mode {mode!r} is not supported")
         except (ValueError, RuntimeError) as exc:
             raise AssetError(self.source, f"bufferView {index}: EXT_meshopt_compression data does not decode ({exc})") from None
-        out = np.asarray(out)
+        out = np.ascontiguousarray(out)
         if mode != "ATTRIBUTES":
-            out = out.astype({2: "<u2", 4: "<u4"}[stride])
+            # The decoder writes ``stride``-byte indices into the wrapper's uint32 array: the
+            # first count * stride bytes are the data (casting the uint32s would mix pairs).
+            if stride not in (2, 4):
+                raise AssetError(self.source, f"bufferView {index}: EXT_meshopt_compression index byteStride {stride} is not 2 or 4")
+            out = out.view(np.uint8)[: count * stride]
         return out.tobytes()
 
     # -- accessors ----------------------------------------------------------------------
