@@ -261,9 +261,9 @@ def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str,
     out = [level0]
     for pre_k, straight_k in zip(pres[1:], straights[1:]):
         alpha = pre_k[..., 3]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            colour = pre_k[..., :3] / alpha[..., None]
         empty = alpha <= (0.5 / 65535.0)
+        colour = np.divide(pre_k[..., :3], alpha[..., None], out=np.zeros(alpha.shape + (3,), np.float32),
+                           where=~empty[..., None])
         colour16 = np.rint(np.clip(colour, 0.0, 1.0) * 65535.0).astype(np.uint16)
         if empty.any():
             colour16[empty] = straight_k[empty]
@@ -312,8 +312,14 @@ def _scale_alpha_for_coverage(alpha: np.ndarray, target: float, cutoff8: int) ->
     return alpha * np.float32(s)
 
 
-def _normal_chain(rgba: np.ndarray, sizes) -> list[np.ndarray]:
-    """Average vectors, renormalise, re-encode. Alpha linear."""
+def normal_unit_levels(rgba: np.ndarray) -> list[np.ndarray]:
+    """The renormalised vectors of every level of a normal map, before 8-bit quantisation.
+
+    ``rgba``: ``(H, W, 4)`` uint8 or uint16; returns ``[(h, w, 4) float32, ...]``, xyz unit
+    length (a zero mean becomes +Z), w = linear alpha in [0, 1]. :func:`build_mip_chain`
+    stores ``rint((xyz + 1) * 127.5)``.
+    """
+    height, width = rgba.shape[:2]
     if rgba.dtype == np.uint8:
         table = np.arange(256, dtype=np.float32) * np.float32(2.0 / 255.0) - np.float32(1.0)
         vec = cv2.LUT(rgba, np.stack([table, table, table, np.arange(256, dtype=np.float32) / 255.0],
@@ -321,22 +327,28 @@ def _normal_chain(rgba: np.ndarray, sizes) -> list[np.ndarray]:
     else:
         vec = rgba.astype(np.float32) * np.float32(1.0 / 65535.0)
         vec[..., :3] = vec[..., :3] * 2.0 - 1.0
-    works = _chain(vec, sizes)
-    return [_encode_normals(w) for w in works]
+    # The unnormalised means are carried down the chain (the exact area average of level 0's
+    # vectors); each level is normalised only for output.
+    return [_unit(w) for w in _chain(vec, mip_sizes(width, height))]
 
 
-def _encode_normals(w: np.ndarray) -> np.ndarray:
-    """(h, w, 4) float32 mean vectors + alpha -> uint8 RGBA with renormalised xyz."""
+def _unit(w: np.ndarray) -> np.ndarray:
     xyz = w[..., :3]
     length = np.sqrt(np.einsum("...i,...i->...", xyz, xyz))
     ok = length > 1e-12
-    unit = np.empty_like(xyz)
-    np.divide(xyz, np.where(ok, length, 1.0)[..., None], out=unit)
+    out = np.empty_like(w)
+    np.divide(xyz, np.where(ok, length, 1.0)[..., None], out=out[..., :3])
     if not ok.all():
-        unit[~ok] = (0.0, 0.0, 1.0)
-    out = np.empty(w.shape[:2] + (4,), dtype=np.uint8)
-    out[..., :3] = np.rint(np.clip((unit + 1.0) * 127.5, 0.0, 255.0))
-    out[..., 3] = np.rint(np.clip(w[..., 3], 0.0, 1.0) * 255.0)
+        out[~ok, :3] = (0.0, 0.0, 1.0)
+    out[..., 3] = w[..., 3]
+    return out
+
+
+def _encode_normals(u: np.ndarray) -> np.ndarray:
+    """(h, w, 4) float32 unit vectors + alpha -> uint8 RGBA (round to nearest)."""
+    out = np.empty(u.shape[:2] + (4,), dtype=np.uint8)
+    out[..., :3] = np.rint(np.clip((u[..., :3] + 1.0) * 127.5, 0.0, 255.0))
+    out[..., 3] = np.rint(np.clip(u[..., 3], 0.0, 1.0) * 255.0)
     return out
 
 
@@ -367,7 +379,7 @@ def build_mip_chain(rgba: np.ndarray, role: str, alpha_mode: str = "OPAQUE", alp
     coverage = None
     mean0 = None
     if role == ROLE_NORMAL:
-        levels = _normal_chain(rgba, sizes)
+        levels = [_encode_normals(u) for u in normal_unit_levels(rgba)]
     elif role == ROLE_BASE_COLOR and _any_alpha_below_max(rgba):
         alpha_weighted = True
         levels, coverage = _premultiplied_chain(rgba, srgb, sizes, alpha_mode, alpha_cutoff)
@@ -401,6 +413,6 @@ def _any_alpha_below_max(rgba: np.ndarray) -> bool:
 
 __all__ = [
     "TextureOptions", "DEFAULT_TEXTURE_OPTIONS", "MipChain", "build_mip_chain", "mip_level_count",
-    "mip_sizes", "srgb_to_linear", "linear_to_srgb", "ROLE_BASE_COLOR", "ROLE_EMISSIVE",
+    "mip_sizes", "normal_unit_levels", "srgb_to_linear", "linear_to_srgb", "ROLE_BASE_COLOR", "ROLE_EMISSIVE",
     "ROLE_METALLIC_ROUGHNESS", "ROLE_OCCLUSION",
 ]

@@ -1,0 +1,206 @@
+"""Decoding every pixel layout we accept into RGBA, and refusing what we must refuse."""
+
+from __future__ import annotations
+
+import io
+import struct
+import zlib
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from assetpipe.errors import InvalidTextureError
+from assetpipe.hashing import digest_bytes
+from pipelines.image_source import sniff_mime
+from pipelines.model import ImageSource
+from pipelines.texture_decode import decode_image, has_alpha_below_255
+
+
+def source(data: bytes, name: str = "t.png", mime: str | None = None) -> ImageSource:
+    mime = mime or sniff_mime(data) or "image/x-tga"
+    return ImageSource(name=name, data=data, mime=mime, origin=f"/models/{name}", digest=digest_bytes(data))
+
+
+def pil_bytes(im: Image.Image, fmt: str, **kw) -> bytes:
+    buf = io.BytesIO()
+    im.save(buf, fmt, **kw)
+    return buf.getvalue()
+
+
+def raw_png(width: int, height: int, depth: int, colour_type: int, raw_rows: bytes) -> bytes:
+    """A minimal PNG (filter 0 rows), for layouts neither Pillow nor OpenCV write."""
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    ihdr = struct.pack(">IIBBBBB", width, height, depth, colour_type, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw_rows)) + chunk(b"IEND", b"")
+
+
+RGB = np.array([[[255, 0, 0], [0, 255, 0], [0, 0, 255]],
+                [[10, 20, 30], [40, 50, 60], [70, 80, 90]]], dtype=np.uint8)  # 2 x 3
+
+
+def test_rgb_png():
+    out = decode_image(source(pil_bytes(Image.fromarray(RGB), "PNG")))
+    assert out.shape == (2, 3, 4) and out.dtype == np.uint8 and out.flags.c_contiguous
+    assert (out[..., :3] == RGB).all() and (out[..., 3] == 255).all()
+    assert not has_alpha_below_255(out)
+
+
+def test_rgba_png():
+    rgba = np.dstack([RGB, np.array([[0, 128, 255], [1, 2, 3]], np.uint8)])
+    out = decode_image(source(pil_bytes(Image.fromarray(rgba, "RGBA"), "PNG")))
+    assert (out == rgba).all()
+    assert has_alpha_below_255(out)
+
+
+def test_palette_png_with_transparency():
+    im = Image.fromarray(RGB).convert("P", palette=Image.Palette.ADAPTIVE, colors=8)
+    idx = np.asarray(im)
+    data = pil_bytes(im, "PNG", transparency=int(idx[0, 0]))
+    out = decode_image(source(data))
+    assert out[0, 0, 3] == 0
+    assert (out[..., 3][idx != idx[0, 0]] == 255).all()
+    assert (out[1, 1, :3] == RGB[1, 1]).all()
+
+
+def test_palette_png_without_transparency():
+    im = Image.fromarray(RGB).convert("P", palette=Image.Palette.ADAPTIVE, colors=8)
+    out = decode_image(source(pil_bytes(im, "PNG")))
+    assert (out[..., :3] == RGB).all() and (out[..., 3] == 255).all()
+
+
+def test_grey_and_grey_alpha_png():
+    grey = np.array([[0, 100], [200, 255]], np.uint8)
+    out = decode_image(source(pil_bytes(Image.fromarray(grey, "L"), "PNG")))
+    assert (out[..., 0] == grey).all() and (out[..., 2] == grey).all() and (out[..., 3] == 255).all()
+    la = Image.fromarray(np.dstack([grey, 255 - grey]), "LA")
+    out = decode_image(source(pil_bytes(la, "PNG")))
+    assert (out[..., 1] == grey).all() and (out[..., 3] == 255 - grey).all()
+    # grey with a colour key
+    out = decode_image(source(pil_bytes(Image.fromarray(grey, "L"), "PNG", transparency=100)))
+    assert out[0, 1, 3] == 0 and out[0, 0, 3] == 255
+
+
+def test_16bit_pngs_keep_16_bits():
+    rgba16 = (np.arange(2 * 3 * 4, dtype=np.uint16).reshape(2, 3, 4) * 2731 + 7)
+    ok, buf = cv2.imencode(".png", rgba16[..., [2, 1, 0, 3]])
+    out = decode_image(source(buf.tobytes()))
+    assert out.dtype == np.uint16 and (out == rgba16).all()
+    ok, buf = cv2.imencode(".png", rgba16[..., [2, 1, 0]])  # RGB 16
+    out = decode_image(source(buf.tobytes()))
+    assert (out[..., :3] == rgba16[..., :3]).all() and (out[..., 3] == 65535).all()
+    ok, buf = cv2.imencode(".png", rgba16[..., 0])  # grey 16
+    out = decode_image(source(buf.tobytes()))
+    assert (out[..., 1] == rgba16[..., 0]).all() and (out[..., 3] == 65535).all()
+    assert not has_alpha_below_255(out)
+
+
+def test_16bit_grey_alpha_png():
+    g = np.array([[1000, 60000]], dtype=np.uint16)
+    a = np.array([[65535, 5]], dtype=np.uint16)
+    rows = b"\x00" + np.dstack([g, a]).astype(">u2").tobytes()  # PNG samples are big-endian
+    out = decode_image(source(raw_png(2, 1, 16, 4, rows)))
+    assert out.dtype == np.uint16
+    assert out[0, 0].tolist() == [1000, 1000, 1000, 65535]
+    assert out[0, 1].tolist() == [60000, 60000, 60000, 5]
+    assert has_alpha_below_255(out)
+
+
+def test_jpeg_tga_bmp():
+    smooth = np.full((8, 8, 3), (200, 100, 50), np.uint8)
+    out = decode_image(source(pil_bytes(Image.fromarray(smooth), "JPEG", quality=95)))
+    assert np.abs(out[..., :3].astype(int) - smooth).max() <= 3 and (out[..., 3] == 255).all()
+    rgba = np.dstack([RGB, np.full((2, 3), 77, np.uint8)])
+    out = decode_image(source(pil_bytes(Image.fromarray(rgba, "RGBA"), "TGA"), "t.tga", "image/x-tga"))
+    assert (out == rgba).all()
+    out = decode_image(source(pil_bytes(Image.fromarray(RGB), "BMP"), "t.bmp"))
+    assert (out[..., :3] == RGB).all()
+
+
+def test_exif_orientation_is_ignored():
+    tall = np.zeros((16, 8, 3), np.uint8)
+    tall[:8] = 255  # top half white
+    exif = Image.Exif()
+    exif[0x0112] = 6  # "rotate 90 CW to display"
+    data = pil_bytes(Image.fromarray(tall), "JPEG", quality=95, exif=exif.tobytes())
+    assert Image.open(io.BytesIO(data)).getexif().get(0x0112) == 6
+    out = decode_image(source(data))
+    assert out.shape == (16, 8, 4)  # stored rows, not rotated
+    assert out[:6, :, 0].min() > 200 and out[10:, :, 0].max() < 50
+
+
+def test_decompression_bomb_is_refused_from_the_header():
+    # IHDR says 100000 x 100000; no pixel data needed to refuse it.
+    data = raw_png(100000, 100000, 8, 6, b"")
+    with pytest.raises(InvalidTextureError, match="over the limit"):
+        decode_image(source(data))
+    small = pil_bytes(Image.fromarray(RGB), "PNG")
+    with pytest.raises(InvalidTextureError, match="6 pixels, over the limit of 5"):
+        decode_image(source(small), max_pixels=5)
+    jpeg = pil_bytes(Image.fromarray(RGB), "JPEG")
+    with pytest.raises(InvalidTextureError, match="over the limit"):
+        decode_image(source(jpeg), max_pixels=5)
+
+
+def test_bomb_above_pillows_own_limit_is_ours_not_a_warning():
+    # 20000 x 20000 exceeds Pillow's MAX_IMAGE_PIXELS warning threshold; a GIF header is enough.
+    data = b"GIF89a" + struct.pack("<HH", 20000, 20000) + b"\x00\x00\x00" + b"," + b"\x00" * 9
+    with _no_warning():
+        with pytest.raises(InvalidTextureError):
+            decode_image(source(data, "bomb.gif"), max_pixels=10_000)
+
+
+class _no_warning:
+    def __enter__(self):
+        import warnings
+        self._cm = warnings.catch_warnings(record=True)
+        self.records = self._cm.__enter__()
+        warnings.simplefilter("always")
+        return self
+
+    def __exit__(self, *exc):
+        self._cm.__exit__(*exc)
+        assert not [r for r in self.records if issubclass(r.category, Image.DecompressionBombWarning)]
+        return False
+
+
+@pytest.mark.parametrize("cut", [40, 100, 300])
+def test_truncated_and_corrupt(cut):
+    rng = np.random.default_rng(0)
+    noisy = rng.integers(0, 256, (32, 32, 3), dtype=np.uint8)
+    data = pil_bytes(Image.fromarray(noisy), "PNG")
+    with pytest.raises(InvalidTextureError, match="/models/t.png"):
+        decode_image(source(data[:cut]))
+    jpeg = pil_bytes(Image.fromarray(noisy), "JPEG")
+    with pytest.raises(InvalidTextureError):
+        decode_image(source(jpeg[:cut], "t.jpg"))
+
+
+def test_garbage_and_unsupported():
+    with pytest.raises(InvalidTextureError):
+        decode_image(source(b"not an image at all", "x.tga", "image/x-tga"))
+    tiff = pil_bytes(Image.fromarray(RGB), "TIFF")
+    with pytest.raises(InvalidTextureError):
+        decode_image(source(tiff, "x.tif", "image/tiff"))
+    corrupt16 = raw_png(4, 4, 16, 2, b"\x00" * 3)
+    with pytest.raises(InvalidTextureError):
+        decode_image(source(corrupt16))
+
+
+def test_corpus_layouts_decode(corpus):
+    models = corpus / "models"
+    cases = {
+        "BoxTexturedNonPowerOfTwo/glTF/CesiumLogoFlat.png": (211, 211),  # palette
+        "Duck/glTF/DuckCM.png": (512, 512),                                # palette
+        "BoxTextured/glTF/CesiumLogoFlat.png": (256, 256),                 # RGBA
+        "TextureTransformTest/glTF/Correct.png": (128, 128),               # RGB
+        "spider/SpiderTex.jpg": (250, 249),                                # JPEG, odd size
+    }
+    for rel, (h, w) in cases.items():
+        data = (models / rel).read_bytes()
+        out = decode_image(source(data, rel))
+        assert out.shape == (h, w, 4) and out.dtype == np.uint8
+        ref = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
+        assert (out == ref).all()
