@@ -6,8 +6,9 @@ readback to numpy.
   push constant. Models with more than 16 textures get one descriptor set per 16.
 * Opaque and MASK draws first, then BLEND draws back to front with alpha blending (depth test
   on, depth write off). ``doubleSided`` disables culling, otherwise back faces are culled.
-* ``mode="silhouette"`` draws every triangle (no culling, no discard) in white: coverage
-  only, used by the geometric checks.
+* ``mode="silhouette"`` draws every triangle in white with the materials' culling (no
+  blending, no alpha discard): what is visible of the geometry, so holes and flipped
+  windings show. ``mode="coverage"`` draws every triangle without culling.
 """
 
 from __future__ import annotations
@@ -357,12 +358,12 @@ class Renderer:
 
         The background is transparent black (alpha 0): alpha > 0 is the coverage.
         """
-        if mode not in ("shaded", "silhouette"):
+        if mode not in ("shaded", "silhouette", "coverage"):
             raise ValueError(f"unknown render mode {mode!r}")
         t0 = time.perf_counter()
         self.resize(camera.width, camera.height)
         vk, ctx = self.vk, self.ctx
-        silhouette = mode == "silhouette"
+        silhouette = mode != "shaded"
         draws = self.draws(gpu, lod, meshes)
         eye = np.asarray(camera.eye, np.float64)
         opaque = [d for d in draws if silhouette or not d.blended]
@@ -409,7 +410,12 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                key = (False, False) if silhouette else (not d.double_sided, d.blended)
+                if mode == "coverage":
+                    key = (False, False)
+                elif silhouette:
+                    key = (not d.double_sided, False)
+                else:
+                    key = (not d.double_sided, d.blended)
                 pipe = self._pipelines[key]
                 if pipe is not bound_pipe:
                     vk.vkCmdBindPipeline(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, pipe)

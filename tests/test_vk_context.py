@@ -66,8 +66,8 @@ def test_back_faces_are_culled_unless_double_sided() -> None:
     try:
         cam = fit_camera(np.zeros(3), 1.0, view_dir=(0, 0, -1), width=64, height=64, distance=0.05)
         img = r.render(gpu, cam, meshes=[0])
-        sil = r.render(gpu, cam, mode="silhouette", meshes=[0])
+        sil = r.render(gpu, cam, mode="coverage", meshes=[0])
     finally:
         r.release(gpu)
     assert (img[..., 3] > 0).sum() == 0       # inside a closed cube all faces are back faces
-    assert (sil[..., 3] > 0).all()             # silhouette mode draws every triangle
+    assert (sil[..., 3] > 0).all()             # coverage mode draws every triangle

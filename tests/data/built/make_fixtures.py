@@ -201,11 +201,15 @@ def write_cube(out: Path) -> None:
     # the "source": the same triangles as an OBJ (LOD0 cube + quad)
     src = HERE / "src"
     src.mkdir(exist_ok=True)
-    lines = ["# fixture source of tests/data/built/cube (written by make_fixtures.py)", "o cube"]
+    Image.fromarray(levels[0], "RGBA").save(src / "checker.png", optimize=False, compress_level=9)
+    (src / "cube.mtl").write_text("newmtl checker\nKd 1 1 1\nmap_Kd checker.png\n\n"
+                                  "newmtl glass\nKd 1 0.5 0.1\nd 0.5\n")
+    lines = ["# fixture source of tests/data/built/cube (written by make_fixtures.py)", "mtllib cube.mtl",
+             "o cube", "usemtl checker"]
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in cube_v[:, :3]]
     lines += [f"vt {u:.6f} {1 - v:.6f}" for u, v in cube_v[:, 3:]]
     lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in lod0]
-    lines += ["o glass"]
+    lines += ["o glass", "usemtl glass"]
     base = len(cube_v)
     lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in quad_v[:, :3]]
     lines += [f"vt {u:.6f} {1 - v:.6f}" for u, v in quad_v[:, 3:]]

@@ -1,0 +1,120 @@
+"""An independent reading of the *source* model (glTF/OBJ via trimesh), for comparison renders.
+
+This path shares nothing with the build's importers: trimesh parses the source, its scene
+graph is flattened with trimesh's own transforms (``Scene.dump``), and the result becomes a
+:class:`~renderer.loader.RenderModel` drawn by the same renderer. Each geometry keeps its
+base colour factor and base-colour image (level 0 only, no mips) when trimesh provides them,
+so renders can be compared in colour as well as in silhouette; anything trimesh cannot
+describe is drawn white.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assetpipe.errors import AssetError, MissingFileError
+
+from .loader import VK_FORMAT_R8G8B8A8_SRGB, Lod, Material, Mesh, RenderModel, Texture
+
+
+def _material_of(geom: Any, name: str, notes: list[str]) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
+    """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry."""
+    visual = getattr(geom, "visual", None)
+    kind = getattr(visual, "kind", None)
+    n = len(geom.vertices)
+    colors = None
+    if kind == "vertex":
+        vc = np.asarray(visual.vertex_colors, np.float32)
+        if vc.shape == (n, 4):
+            colors = vc / 255.0
+    mat = getattr(visual, "material", None) if kind == "texture" else None
+    uv = None
+    if kind == "texture" and getattr(visual, "uv", None) is not None and len(visual.uv) == n:
+        uv = np.asarray(visual.uv, np.float32).copy()
+        uv[:, 1] = 1.0 - uv[:, 1]  # trimesh stores bottom-left (OpenGL) UVs
+    attrs = getattr(visual, "vertex_attributes", None) or getattr(geom, "vertex_attributes", None) or {}
+    col = attrs.get("color") if hasattr(attrs, "get") else None
+    if col is not None and len(col) == n:
+        c = np.asarray(col, np.float32)
+        c = c / 255.0 if c.max(initial=0) > 1.0 else c
+        colors = np.ones((n, 4), np.float32)
+        colors[:, : min(4, c.shape[1])] = c[:, :4]
+    factor = (1.0, 1.0, 1.0, 1.0)
+    image = None
+    alpha_mode, cutoff, double_sided = "OPAQUE", 0.5, False
+    if mat is not None:
+        f = getattr(mat, "baseColorFactor", None)
+        if f is None and getattr(mat, "diffuse", None) is not None:
+            f = mat.diffuse
+        if f is not None:
+            fa = np.asarray(f, np.float64).reshape(-1)
+            if fa.dtype.kind in "ui" or fa.max(initial=0) > 1.0:
+                fa = fa / 255.0
+            factor = tuple(float(x) for x in np.r_[fa, [1.0] * 4][:4])  # type: ignore[assignment]
+        image = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
+        alpha_mode = str(getattr(mat, "alphaMode", None) or ("BLEND" if factor[3] < 1.0 else "OPAQUE"))
+        cutoff = float(getattr(mat, "alphaCutoff", None) or 0.5)
+        double_sided = bool(getattr(mat, "doubleSided", False))
+    texture = None
+    if image is not None and uv is not None:
+        try:
+            rgba = np.asarray(image.convert("RGBA"), np.uint8)
+            texture = Texture(name=f"{name} source image", levels=[rgba], vk_format=VK_FORMAT_R8G8B8A8_SRGB,
+                              sampler={"minFilter": 9729}, from_ktx2=False)
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"{name}: source image not usable ({exc})")
+    return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
+                     double_sided=double_sided, texture=texture), uv, colors)
+
+
+def load_source_model(path: Path, flat: bool = False) -> RenderModel:
+    """Import ``path`` with trimesh, flatten its scene, and return it as a RenderModel.
+
+    ``flat=True`` ignores materials (one white opaque material). Points and lines are dropped.
+    """
+    import trimesh  # noqa: PLC0415
+
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(path, "source file is missing")
+    try:
+        scene = trimesh.load(str(path), force="scene", process=False)
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds
+        raise AssetError(path, f"trimesh cannot import the source: {exc}") from exc
+    geoms = [g for g in scene.dump(concatenate=False) if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    notes: list[str] = []
+    positions, uvs, colors, indices = [], [], [], []
+    meshes: list[Mesh] = []
+    materials: list[Material] = [Material(id="flat")] if flat else []
+    base = first = 0
+    for k, g in enumerate(geoms):
+        v = np.asarray(g.vertices, np.float64)
+        f = np.asarray(g.faces, np.int64)
+        n = len(v)
+        if flat:
+            mat_index, uv, col = 0, None, None
+        else:
+            mat, uv, col = _material_of(g, f"source-{k}", notes)
+            mat_index = len(materials)
+            materials.append(mat)
+        positions.append(v.astype(np.float32))
+        uvs.append(uv if uv is not None else np.zeros((n, 2), np.float32))
+        colors.append(col if col is not None else np.ones((n, 4), np.float32))
+        indices.append(f.astype(np.uint32).reshape(-1))
+        center = (v.min(0) + v.max(0)) / 2
+        meshes.append(Mesh(id=f"source-{k}", material=mat_index, vertex_base=base, vertex_count=n,
+                           lods=[Lod(level=0, first_index=first, index_count=f.size)], center=center))
+        base += n
+        first += f.size
+    if not geoms:
+        raise AssetError(path, "the source has no triangles trimesh can read")
+    pos = np.concatenate(positions)
+    lo, hi = pos.min(0).astype(np.float64), pos.max(0).astype(np.float64)
+    return RenderModel(id=path.stem, positions=pos, uvs=np.concatenate(uvs).astype(np.float32),
+                       colors=np.concatenate(colors).astype(np.float32),
+                       indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
+                       bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
+                       radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)

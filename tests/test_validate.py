@@ -1,0 +1,178 @@
+"""The validator: the fixture passes every check; deliberately broken builds fail."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from renderer.reports import write_json_report, write_junit_report
+from renderer.session import shared_renderer
+from renderer.validate import ValidateOptions, ValidationResult, validate_batch, validate_model
+
+pytestmark = pytest.mark.vulkan
+BUILT = Path(__file__).parent / "data" / "built"
+CUBE = BUILT / "cube" / "cube.json"
+OPTS = ValidateOptions(width=128, height=128)
+
+
+def _fixtures_module():
+    spec = importlib.util.spec_from_file_location("make_fixtures", BUILT / "make_fixtures.py")
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture()
+def cube(tmp_path: Path) -> Path:
+    shutil.copytree(BUILT / "cube", tmp_path / "cube")
+    shutil.copytree(BUILT / "src", tmp_path / "src")
+    return tmp_path / "cube" / "cube.json"
+
+
+def _ktx(cube: Path) -> Path:
+    return next((cube.parent / "textures").glob("*.ktx2"))
+
+
+def test_fixture_passes_every_check() -> None:
+    r = validate_model(CUBE, OPTS, isolate=False)
+    assert r.passed, r.failures()
+    assert [c.name for c in r.checks] == ["load", "vulkan", "silhouette", "source", "lods", "textures"]
+    assert all(c.status == "pass" for c in r.checks)
+    sil = r.check("silhouette")
+    assert sil is not None and all(v["maxBoxErrorPx"] <= 1.0 for v in sil.figures["views"])
+    src = r.check("source")
+    assert src is not None and all(v["xor"] < 0.01 for v in src.figures["views"])
+
+
+def test_index_out_of_range_fails(cube: Path) -> None:
+    idx = cube.with_name("cube.idx")
+    a = np.fromfile(idx, "<u4")
+    a[7] = 4000
+    a.tofile(idx)
+    r = validate_model(cube, OPTS, isolate=False)
+    assert not r.passed and r.check("load").status == "fail"
+    assert "out of range" in r.failures()[0]
+
+
+def test_wrong_material_id_fails(cube: Path) -> None:
+    seed = json.loads(cube.read_text())
+    seed["meshes"][1]["materialId"] = "cube-mat-9"
+    cube.write_text(json.dumps(seed))
+    r = validate_model(cube, OPTS, isolate=False)
+    assert not r.passed and "cube-mat-9" in " ".join(r.failures())
+
+
+def test_truncated_vtx_fails(cube: Path) -> None:
+    vtx = cube.with_name("cube.vtx")
+    vtx.write_bytes(vtx.read_bytes()[:-40])
+    r = validate_model(cube, OPTS, isolate=False)
+    assert not r.passed and "truncated" in " ".join(r.failures())
+
+
+def test_swapped_texture_fails(cube: Path) -> None:
+    """Another texture (same size) in place of the material's: level 0 and colours disagree."""
+    mk = _fixtures_module()
+    levels = [np.ascontiguousarray(lv[..., [2, 0, 1, 3]]) for lv in mk.texture_levels()]  # other colours
+    _ktx(cube).write_bytes(mk.ktx2_bytes(levels))
+    r = validate_model(cube, OPTS, isolate=False)
+    assert not r.passed
+    assert r.check("textures").status == "fail"
+    assert r.check("source").status == "fail", r.check("source")
+
+
+def test_missing_mip_level_fails(cube: Path) -> None:
+    mk = _fixtures_module()
+    _ktx(cube).write_bytes(mk.ktx2_bytes(mk.texture_levels()[:3]))
+    r = validate_model(cube, OPTS, isolate=False)
+    tex = r.check("textures")
+    assert tex is not None and tex.status == "fail"
+    assert any("3 of 4 mip levels" in m for m in tex.messages)
+
+
+def test_black_mip_level_fails(cube: Path) -> None:
+    mk = _fixtures_module()
+    levels = mk.texture_levels()
+    levels[2] = np.zeros_like(levels[2])
+    _ktx(cube).write_bytes(mk.ktx2_bytes(levels))
+    r = validate_model(cube, OPTS, isolate=False)
+    assert any("level 2 is all black" in m for m in r.check("textures").messages)
+
+
+def test_bad_lod_fails(cube: Path) -> None:
+    """LOD1 that lost a face: far more than 1 px away from LOD0 at its switch distance."""
+    idx = cube.with_name("cube.idx")
+    a = np.fromfile(idx, "<u4")
+    a[150:156] = 0  # the first face of LOD1 becomes degenerate
+    a.tofile(idx)
+    r = validate_model(cube, OPTS, isolate=False)
+    lods = r.check("lods")
+    assert lods is not None and lods.status == "fail", lods
+    assert r.check("silhouette").status == "pass"
+
+
+def test_moved_geometry_fails_source_check(cube: Path) -> None:
+    """Vertices shifted in the build (bounds kept): the render no longer matches the source."""
+    vtx = cube.with_name("cube.vtx")
+    v = np.fromfile(vtx, "<f4").reshape(-1, 5)
+    v[:54, 0] *= 0.7
+    v.tofile(vtx)
+    r = validate_model(cube, OPTS, isolate=False)
+    assert r.check("source").status == "fail"
+
+
+def test_validation_messages_are_collected() -> None:
+    """An invalid Vulkan call shows up in the context's messages (what the vulkan check reads)."""
+    r = shared_renderer()
+    vk, ctx = r.vk, r.ctx
+    ctx.take_messages()
+    buf = vk.vkCreateBuffer(ctx.device, vk.VkBufferCreateInfo(size=0, usage=vk.VK_BUFFER_USAGE_VERTEX_BUFFER_BIT,
+                                                              sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE), None)
+    vk.vkDestroyBuffer(ctx.device, buf, None)
+    msgs = ctx.take_messages()
+    assert msgs and any("size" in text for _, text in msgs)
+
+
+def test_batch_in_subprocess_with_reports(tmp_path: Path, cube: Path) -> None:
+    idx = cube.with_name("cube.idx")
+    a = np.fromfile(idx, "<u4")
+    a[0] = 10_000
+    a.tofile(idx)
+    results = validate_batch([CUBE, cube, tmp_path / "missing.json"], OPTS)
+    assert [r.passed for r in results] == [True, False, False]
+    assert results[0].timings["setup"] > 0
+    write_json_report(results, tmp_path / "report.json")
+    write_junit_report(results, tmp_path / "report.xml")
+    data = json.loads((tmp_path / "report.json").read_text())
+    assert data["summary"] == {"models": 3, "passed": 1, "failed": 2}
+    assert ValidationResult.from_json(data["results"][0]).passed
+    root = ET.parse(tmp_path / "report.xml").getroot()
+    assert root.tag == "testsuites" and int(root.get("failures")) >= 2
+
+
+def test_crash_fails_one_asset_and_batch_continues(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A renderer process that dies (here: SIGKILL on a marker file) fails that asset only."""
+    crash = tmp_path / "crash"
+    crash.mkdir()
+    (crash / "crash.json").write_text("{}")
+    monkeypatch.setenv("ASSETPIPE_RENDERER_CRASH_ON", "crash.json")
+    results = validate_batch([crash / "crash.json", CUBE], OPTS)
+    assert results[0].error is not None and "SIGKILL" in results[0].error
+    assert results[1].passed, results[1].failures()
+
+
+def test_timeout_fails_one_asset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    hang = tmp_path / "hang"
+    hang.mkdir()
+    (hang / "hang.json").write_text("{}")
+    monkeypatch.setenv("ASSETPIPE_RENDERER_HANG_ON", "hang.json")
+    opts = ValidateOptions(width=128, height=128, timeout_s=2.0)
+    results = validate_batch([hang / "hang.json", CUBE], opts)
+    assert results[0].error is not None and "timed out" in results[0].error
+    assert results[1].passed
