@@ -606,6 +606,29 @@ def _unique_vertices(keys: np.ndarray, key_range: int) -> tuple[np.ndarray, np.n
     return first[order], rank[inverse.reshape(-1)]
 
 
+def _unit_normals(normals: np.ndarray, positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, int]:
+    """Normalise (N, 3) normals; returns ((N, 3) float32 unit normals, how many were repaired).
+
+    Zero-length normals (``vn 0 0 0`` happens in real files, e.g. spider.obj) are replaced by
+    the area-weighted normal of the triangles using the vertex (positions (N, 3), indices
+    (M, 3)), or +z when those triangles have no area.
+    """
+    length = np.linalg.norm(normals, axis=1)
+    zero = ~(length > 0)
+    out = normals / np.where(zero, 1.0, length)[:, None]
+    if not zero.any():
+        return out.astype(np.float32), 0
+    p = positions[indices]  # (M, 3, 3)
+    face = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # (M, 3), length = 2 * area
+    acc = np.zeros_like(out)
+    for k in range(3):
+        np.add.at(acc, indices[:, k], face)
+    acc_len = np.linalg.norm(acc, axis=1)
+    fixed = np.where(acc_len[:, None] > 0, acc / np.where(acc_len > 0, acc_len, 1.0)[:, None], [0.0, 0.0, 1.0])
+    out[zero] = fixed[zero]
+    return out.astype(np.float32), int(zero.sum())
+
+
 def _build_meshes(geo: _Geometry, state: _State, material_index: dict[str, int], path: Path,
                   warnings: list[str]) -> list[MeshData]:
     corners, owner = _triangulate(geo)
@@ -647,9 +670,10 @@ def _build_meshes(geo: _Geometry, state: _State, material_index: dict[str, int],
             uv0 = uv.astype(np.float32)
         normals = None
         if (vn >= 0).all():
-            nrm = geo.normals[vn]
-            length = np.linalg.norm(nrm, axis=1, keepdims=True)
-            normals = (nrm / np.where(length > 0, length, 1.0)).astype(np.float32)
+            normals, repaired = _unit_normals(geo.normals[vn], geo.positions[v], inverse.reshape(-1, 3))
+            if repaired:
+                warnings.append(f"{path.name}: mesh {name!r}: {repaired} zero-length normal(s) "
+                                "replaced by the surrounding faces' normal")
         elif (vn >= 0).any():
             warnings.append(f"{path.name}: mesh {name!r}: some faces have no normals: normals dropped")
 
