@@ -87,9 +87,11 @@ class MipChain:
     ``coverage``: for alphaMode MASK on baseColor, per level, the fraction of texels with
     ``alpha/255 >= alpha_cutoff``; else ``None``.
     ``mean_drift``: per level, the largest over R, G, B, A of
-    ``|mean(level k) - mean(level 0)|`` in linear light (sRGB roles decoded), in 1/255 units:
-    a cheap check that filtering preserves energy (naive sRGB averaging drifts by several
-    units, coverage scaling for MASK legitimately changes the alpha mean).
+    ``|mean(level k) - mean(level 0)|`` in linear light (sRGB roles decoded), in 1/255 units;
+    for alpha-weighted chains over R*A, G*A, B*A and A (what such filtering conserves). A
+    cheap check that filtering preserves energy: naive sRGB averaging drifts by several units,
+    8-bit rounding of the smallest levels by up to ~1; coverage scaling for MASK changes the
+    alpha mean on purpose. Normal maps: the encoded values' plain means.
     ``alpha_weighted``: colour was filtered premultiplied by alpha.
     ``dropped_levels``: top levels removed to honour ``max_size``.
     """
@@ -226,6 +228,19 @@ def _linear_means(levels8: list[np.ndarray], srgb: bool, mean0: np.ndarray | Non
         n = lv.shape[0] * lv.shape[1]
         m = [float(cv2.calcHist([lv], [c], None, [256], [0, 256]).reshape(-1) @ tables[c]) / n for c in range(4)]
         means.append(np.asarray(m))
+    return means
+
+
+def _premultiplied_means(levels8: list[np.ndarray], srgb: bool) -> list[np.ndarray]:
+    """Per level, the mean of linear R*A, G*A, B*A and of A, in [0, 255] units (float64 (4,)):
+    the quantities alpha-weighted filtering conserves."""
+    table = ((_LIN16_FROM_SRGB8 if srgb else _ID16_FROM_8).astype(np.float32) / 65535.0)
+    lut = np.stack([table, table, table, np.arange(256, dtype=np.float32) / 255.0], axis=-1).reshape(1, 256, 4)
+    means = []
+    for lv in levels8:
+        f = cv2.LUT(lv, lut)
+        f[..., :3] *= f[..., 3:4]
+        means.append(np.asarray(cv2.mean(f)[:4], dtype=np.float64) * 255.0)
     return means
 
 
@@ -397,7 +412,10 @@ def build_mip_chain(rgba: np.ndarray, role: str, alpha_mode: str = "OPAQUE", alp
         if coverage is not None:
             coverage = coverage[dropped:]
 
-    means = _linear_means(levels, srgb and role != ROLE_NORMAL, mean0 if dropped == 0 else None)
+    if alpha_weighted:
+        means = _premultiplied_means(levels, srgb)
+    else:
+        means = _linear_means(levels, srgb and role != ROLE_NORMAL, mean0 if dropped == 0 else None)
     drift = tuple(float(np.max(np.abs(m - means[0]))) for m in means)
     for lv in levels:
         lv.setflags(write=False)

@@ -1,0 +1,225 @@
+"""process_texture: the build's entry point; and every textured corpus model through it."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import struct
+import urllib.parse
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from assetpipe.errors import InvalidTextureError
+from assetpipe.hashing import digest_bytes
+from assetpipe.ktx2 import read_ktx2
+from pipelines.image_source import sniff_mime
+from pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+                             ROLE_OCCLUSION, ImageSource)
+from pipelines.texture_mips import TextureOptions, mip_level_count
+from pipelines.texture_process import TEXTURE_STEP_VERSION, ProcessedTexture, process_texture
+
+
+def source(data: bytes, name: str = "t.png", mime: str | None = None) -> ImageSource:
+    mime = mime or sniff_mime(data) or "image/x-tga"
+    return ImageSource(name=name, data=data, mime=mime, origin=f"/models/{name}", digest=digest_bytes(data))
+
+
+def encoded(arr: np.ndarray, fmt: str, **kw) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(arr).save(buf, fmt, **kw)
+    return buf.getvalue()
+
+
+def check(result: ProcessedTexture, role: str) -> None:
+    img = read_ktx2(result.ktx2, "result.ktx2")
+    assert (img.width, img.height, len(img.levels)) == (result.width, result.height, result.levels)
+    assert result.levels == mip_level_count(result.width, result.height)
+    assert img.vk_format == result.vk_format == (43 if role in (ROLE_BASE_COLOR, ROLE_EMISSIVE) else 37)
+    assert result.color_space == ("srgb" if result.srgb else "linear")
+    assert len(result.mean_drift) == result.levels
+    decoded = Image.open(io.BytesIO(result.level0))
+    assert decoded.size == (result.width, result.height)
+    assert {".png": "PNG", ".jpg": "JPEG"}[result.level0_ext] == decoded.format
+
+
+def test_png_source_kept_as_is():
+    rgba = np.random.default_rng(0).integers(0, 256, (37, 50, 4), dtype=np.uint8)
+    data = encoded(rgba, "PNG")
+    res = process_texture(source(data), ROLE_BASE_COLOR, "BLEND", 0.5)
+    check(res, ROLE_BASE_COLOR)
+    assert res.level0 is data and res.level0_ext == ".png" and res.level0_shared
+    assert res.has_alpha_below_255 and res.alpha_weighted
+    assert (read_ktx2(res.ktx2).levels[0] == rgba).all()
+    assert TEXTURE_STEP_VERSION == 1
+
+
+def test_jpeg_source_kept_and_roles():
+    rgb = np.random.default_rng(1).integers(0, 256, (64, 32, 3), dtype=np.uint8)
+    data = encoded(rgb, "JPEG")
+    for role in (ROLE_BASE_COLOR, ROLE_NORMAL, ROLE_METALLIC_ROUGHNESS, ROLE_OCCLUSION, ROLE_EMISSIVE):
+        res = process_texture(source(data, "t.jpg"), role)
+        check(res, role)
+        assert res.level0 == data and res.level0_ext == ".jpg"
+        assert not res.has_alpha_below_255 and res.coverage is None
+
+
+def test_tga_becomes_png_and_max_size_reencodes():
+    rgba = np.random.default_rng(2).integers(0, 256, (40, 100, 4), dtype=np.uint8)
+    res = process_texture(source(encoded(rgba, "TGA"), "t.tga", "image/x-tga"), ROLE_BASE_COLOR, "MASK", 0.5)
+    check(res, ROLE_BASE_COLOR)
+    assert res.level0_ext == ".png" and res.level0_shared
+    assert (np.asarray(Image.open(io.BytesIO(res.level0)).convert("RGBA")) == rgba).all()
+    assert res.coverage is not None and len(res.coverage) == res.levels
+
+    data = encoded(rgba[..., :3].copy(), "PNG")
+    small = process_texture(source(data), ROLE_OCCLUSION, options=TextureOptions(max_size=30))
+    check(small, ROLE_OCCLUSION)
+    assert (small.width, small.height) == (25, 10) and (small.source_width, small.source_height) == (100, 40)
+    assert small.level0_ext == ".png" and not small.level0_shared
+    assert Image.open(io.BytesIO(small.level0)).mode == "RGB"  # opaque: written without alpha
+
+
+def test_16bit_png_kept_as_source():
+    import cv2
+
+    rgb16 = np.random.default_rng(3).integers(0, 65536, (8, 8, 3), dtype=np.uint16)
+    ok, buf = cv2.imencode(".png", rgb16)
+    res = process_texture(source(buf.tobytes()), ROLE_BASE_COLOR)
+    check(res, ROLE_BASE_COLOR)
+    assert res.level0 == buf.tobytes()
+
+
+def test_errors_name_the_image():
+    with pytest.raises(InvalidTextureError, match="/models/bad.png"):
+        process_texture(source(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40, "bad.png"), ROLE_BASE_COLOR)
+    big = encoded(np.zeros((64, 64, 3), np.uint8), "PNG")
+    with pytest.raises(InvalidTextureError, match="over the limit"):
+        process_texture(source(big), ROLE_BASE_COLOR, options=TextureOptions(max_pixels=1000))
+
+
+# ----------------------------------------------------------------------------- the corpus
+
+_ROLE_KEYS = (
+    (ROLE_NORMAL, ("normalTexture",)),
+    (ROLE_OCCLUSION, ("occlusionTexture",)),
+    (ROLE_EMISSIVE, ("emissiveTexture",)),
+    (ROLE_BASE_COLOR, ("pbrMetallicRoughness", "baseColorTexture")),
+    (ROLE_METALLIC_ROUGHNESS, ("pbrMetallicRoughness", "metallicRoughnessTexture")),
+)
+
+
+def _gltf_uses(path: Path) -> list[tuple[ImageSource, str, str, float]]:
+    """(image, role, alphaMode, alphaCutoff) for every texture use in a .gltf/.glb (test-only
+    reader: JSON, data URIs, files, buffer views of the GLB binary chunk or external .bin)."""
+    raw = path.read_bytes()
+    bin_chunk = b""
+    if raw[:4] == b"glTF":
+        json_len = struct.unpack_from("<I", raw, 12)[0]
+        doc = json.loads(raw[20:20 + json_len])
+        rest = 20 + json_len
+        if rest < len(raw):
+            bin_len = struct.unpack_from("<I", raw, rest)[0]
+            bin_chunk = raw[rest + 8:rest + 8 + bin_len]
+    else:
+        doc = json.loads(raw)
+
+    def buffer_bytes(i: int) -> bytes:
+        buf = doc["buffers"][i]
+        if "uri" not in buf:
+            return bin_chunk
+        uri = buf["uri"]
+        if uri.startswith("data:"):
+            return base64.b64decode(uri.split(",", 1)[1])
+        return (path.parent / urllib.parse.unquote(uri)).read_bytes()
+
+    def image(i: int) -> ImageSource:
+        img = doc["images"][i]
+        if "bufferView" in img:
+            bv = doc["bufferViews"][img["bufferView"]]
+            off = bv.get("byteOffset", 0)
+            data = buffer_bytes(bv["buffer"])[off:off + bv["byteLength"]]
+        elif img["uri"].startswith("data:"):
+            data = base64.b64decode(img["uri"].split(",", 1)[1])
+        else:
+            data = (path.parent / urllib.parse.unquote(img["uri"])).read_bytes()
+        return source(data, f"{path.name}#images[{i}]")
+
+    uses = []
+    for mat in doc.get("materials", []):
+        for role, keys in _ROLE_KEYS:
+            node = mat
+            for k in keys:
+                node = node.get(k) if isinstance(node, dict) else None
+            if node is None:
+                continue
+            tex = doc["textures"][node["index"]]
+            if "source" not in tex:
+                continue
+            uses.append((image(tex["source"]), role, mat.get("alphaMode", "OPAQUE"), mat.get("alphaCutoff", 0.5)))
+    return uses
+
+
+def _obj_uses(path: Path) -> list[tuple[ImageSource, str, str, float]]:
+    uses = []
+    for mtl in path.parent.glob("*.mtl"):
+        for line in mtl.read_text(errors="replace").splitlines():
+            parts = line.strip().split(None, 1)
+            if len(parts) == 2 and parts[0].lower() in ("map_kd", "map_bump", "bump", "norm"):
+                name = parts[1].strip().replace("\\", "/").split("/")[-1]
+                f = path.parent / name
+                if f.is_file():
+                    role = ROLE_BASE_COLOR if parts[0].lower() == "map_kd" else ROLE_NORMAL
+                    uses.append((source(f.read_bytes(), name), role, "OPAQUE", 0.5))
+    return uses
+
+
+def corpus_texture_uses(models: Path) -> dict[str, list]:
+    out = {}
+    for model_dir in sorted(p for p in models.iterdir() if p.is_dir()):
+        uses = []
+        for f in sorted(model_dir.rglob("*")):
+            if f.suffix.lower() in (".gltf", ".glb"):
+                uses += _gltf_uses(f)
+            elif f.suffix.lower() == ".obj":
+                uses += _obj_uses(f)
+        if uses:
+            out[model_dir.name] = uses
+    return out
+
+
+@pytest.mark.corpus
+def test_every_textured_corpus_model_builds_its_chains(corpus):
+    uses = corpus_texture_uses(corpus / "models")
+    assert len(uses) >= 15, sorted(uses)
+    done: dict[tuple, ProcessedTexture] = {}
+    for model, model_uses in uses.items():
+        for image, role, mode, cutoff in model_uses:
+            key = (image.digest, role, mode, cutoff)
+            if key in done:
+                continue
+            res = process_texture(image, role, mode, cutoff)
+            check(res, role)
+            ktx = read_ktx2(res.ktx2, f"{model}/{image.name}")
+            assert (ktx.levels[0].shape[1], ktx.levels[0].shape[0]) == (res.source_width, res.source_height)
+            if role != ROLE_NORMAL and mode != "MASK":
+                assert max(res.mean_drift) < 2.0, (model, image.name, role, res.mean_drift)
+            if res.coverage is not None:
+                for k, cov in enumerate(res.coverage):
+                    if max(res.width >> k, res.height >> k) >= 16:
+                        assert abs(cov - res.coverage[0]) <= 0.01, (model, image.name, k, res.coverage)
+            done[key] = res
+    assert len(done) >= 25
+
+
+def test_corpus_use_finder_sees_embedded_images(corpus):
+    # the corpus-wide test above relies on this reader; check the embedded cases cheaply
+    embedded = _gltf_uses(corpus / "models" / "BoxTextured-glTF-Embedded" / "BoxTextured.gltf")
+    assert embedded and embedded[0][0].mime == "image/png"
+    glb = _gltf_uses(corpus / "models" / "greenman" / "greenman.glb")
+    assert glb and all(u[0].mime in ("image/png", "image/jpeg") for u in glb)
+    res = process_texture(*embedded[0])
+    check(res, embedded[0][1])
