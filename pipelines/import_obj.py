@@ -637,7 +637,11 @@ def _build_meshes(geo: _Geometry, state: _State, material_index: dict[str, int],
     event = np.searchsorted(np.asarray(state.event_lines), geo.poly_line, side="right") - 1
     poly_key = np.asarray(state.event_keys)[event]  # (P,) grouping key of each polygon
     tri_key = poly_key[owner]
-    key_ids, first_tri = np.unique(tri_key, return_index=True)
+    key_ids, first_tri, tri_count = np.unique(tri_key, return_index=True, return_counts=True)
+    # triangles grouped by key, file order inside each group
+    by_key = np.arange(tri_key.size) if key_ids.size == 1 else np.argsort(tri_key, kind="stable")
+    key_offset = dict(zip(key_ids.tolist(), (np.cumsum(tri_count) - tri_count).tolist()))
+    key_count = dict(zip(key_ids.tolist(), tri_count.tolist()))
     names = {kid: key for key, kid in state.keys.items()}
 
     # One integer per (v, vt, vn) triple; dense ids when the product would overflow int64.
@@ -654,7 +658,8 @@ def _build_meshes(geo: _Geometry, state: _State, material_index: dict[str, int],
     meshes: list[MeshData] = []
     for kid in key_ids[np.argsort(first_tri, kind="stable")]:
         obj, group, mat_name = names[int(kid)]
-        tri_corners = corners[tri_key == kid]  # (M, 3) corner numbers
+        start = key_offset[int(kid)]
+        tri_corners = corners[by_key[start:start + key_count[int(kid)]]]  # (M, 3) corner numbers
         first, inverse = _unique_vertices(triple[tri_corners.reshape(-1)], key_range)
         used = tri_corners.reshape(-1)[first]  # (N,) one corner standing for each output vertex
         name = group or obj or path.stem

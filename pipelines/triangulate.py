@@ -52,13 +52,10 @@ def _turns(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return s
 
 
-def _fan(n: int, start: np.ndarray | int = 0) -> np.ndarray:
-    """Fan triangles of an n-gon from corner ``start``: (n-2, 3) or (P, n-2, 3) int64."""
-    k = np.arange(n - 2)
-    base = np.stack([np.zeros(n - 2, np.int64), k + 1, k + 2], axis=1)  # (n-2, 3)
-    if np.isscalar(start):
-        return (base + int(start)) % n
-    return (base[None, :, :] + np.asarray(start, np.int64)[:, None, None]) % n
+def _fan(n: int) -> np.ndarray:
+    """Fan triangles of an n-gon from corner 0: (n-2, 3) int64."""
+    k = np.arange(n - 2, dtype=np.int64)
+    return np.stack([np.zeros(n - 2, np.int64), k + 1, k + 2], axis=1)
 
 
 def triangulate_polygons(points: np.ndarray) -> np.ndarray:
