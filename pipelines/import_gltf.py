@@ -73,6 +73,9 @@ def _parse(path: Path):
         gltf = pygltflib.GLTF2.from_json(text)
     except Exception as exc:  # pygltflib raises assorted errors on malformed structure
         raise AssetError(path, f"has a malformed glTF structure ({type(exc).__name__}: {exc})") from None
+    # pygltflib's Node has no ``weights`` field and drops it: carry the morph weights over
+    for node, raw in zip(gltf.nodes or [], doc.get("nodes") or []):
+        node.weights = raw.get("weights") if isinstance(raw, dict) else None
     return gltf, blob
 
 
@@ -210,7 +213,7 @@ def _flatten(ctx: _Ctx, uv_transforms: dict[int, tuple[int, np.ndarray]]) -> lis
     nodes = gltf.nodes or []
     meshes: list[MeshData] = []
     placements: dict[int, int] = {}
-    decoded: dict[tuple[int, int], tuple | None] = {}
+    decoded: dict[tuple, tuple | None] = {}
     # iterative DFS: (node index, parent world matrix, ancestors)
     stack = [(r, np.eye(4), frozenset()) for r in reversed(_scene_roots(gltf))]
     visits = 0
@@ -253,7 +256,8 @@ def _place_mesh(ctx, node, mesh_index: int, placement: int, world: np.ndarray,
     if weights is None:
         weights = getattr(mesh, "weights", None)
     for pi, prim in enumerate(mesh.primitives or []):
-        key = (mesh_index, pi)
+        # morphed primitives depend on the placing node's weights
+        key = (mesh_index, pi, tuple(weights or ()) if prim.targets else None)
         if key not in decoded:
             decoded[key] = _decode_primitive(ctx, mesh_index, pi, prim, weights, uv_transforms)
         d = decoded[key]
