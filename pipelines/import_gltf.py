@@ -215,7 +215,10 @@ def _flatten(ctx: _Ctx, uv_transforms: dict[int, tuple[int, np.ndarray]]) -> lis
     placements: dict[int, int] = {}
     decoded: dict[tuple, tuple | None] = {}
     # iterative DFS: (node index, parent world matrix, ancestors)
-    stack = [(r, np.eye(4), frozenset()) for r in reversed(_scene_roots(gltf))]
+    roots = _scene_roots(gltf)
+    if not gltf.scenes and nodes and not roots:
+        raise AssetError(ctx.source, "node hierarchy has a cycle: every node is another node's child")
+    stack = [(r, np.eye(4), frozenset()) for r in reversed(roots)]
     visits = 0
     skin_warned = False
     while stack:

@@ -243,6 +243,27 @@ def test_node_cycle_is_an_asset_error(tmp_path, children):
         build(b, tmp_path)
 
 
+@pytest.mark.timeout(10)
+def test_node_cycle_without_scenes_is_an_asset_error(tmp_path):
+    b = GltfBuilder()
+    mesh = b.add_triangles(TRI)
+    b.add_node(root=False, mesh=mesh, children=[1])
+    b.add_node(root=False, mesh=mesh, children=[0])
+    with pytest.raises(AssetError, match="cycle"):
+        build(b, tmp_path)
+
+
+def test_shared_subtree_is_placed_under_each_parent(tmp_path):
+    b = GltfBuilder()
+    shared = b.add_node(root=False, mesh=b.add_triangles(TRI), translation=[0, 0, 1])
+    b.add_node(children=[shared], translation=[1, 0, 0])
+    b.add_node(children=[shared], translation=[2, 0, 0])
+    a, c = build(b, tmp_path).meshes
+    np.testing.assert_allclose(a.positions, TRI + [1, 0, 1])
+    np.testing.assert_allclose(c.positions, TRI + [2, 0, 1])
+    assert c.name == "mesh-0-0-n1"
+
+
 def test_missing_node_is_an_asset_error(tmp_path):
     b = GltfBuilder()
     b.add_node(mesh=b.add_triangles(TRI), children=[5])
