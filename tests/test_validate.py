@@ -176,3 +176,18 @@ def test_timeout_fails_one_asset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     results = validate_batch([hang / "hang.json", CUBE], opts)
     assert results[0].error is not None and "timed out" in results[0].error
     assert results[1].passed
+
+
+def test_cli_commands(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from renderer.cli_commands import preview, validate
+
+    runner = CliRunner()
+    res = runner.invoke(validate, [str(BUILT), "--in-process", "--size", "96", "--junit", str(tmp_path / "j.xml")])
+    assert res.exit_code == 0, res.output
+    assert "1 of 1 models passed" in res.output and (tmp_path / "j.xml").is_file()
+    res = runner.invoke(validate, [str(BUILT), "--checks", "load,bogus"])
+    assert res.exit_code != 0
+    res = runner.invoke(preview, [str(CUBE), "-o", str(tmp_path / "p.png"), "--size", "64"])
+    assert res.exit_code == 0 and (tmp_path / "p.png").is_file()
