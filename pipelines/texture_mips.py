@@ -173,12 +173,14 @@ def _u16_to_u8(x: np.ndarray) -> np.ndarray:
     return cv2.convertScaleAbs(x, alpha=1.0 / 257.0)
 
 
-def _encode_work16(w: np.ndarray, srgb: bool) -> np.ndarray:
-    """uint16 working values (h, w, 4) -> uint8 RGBA."""
+def _encode_work16(w: np.ndarray, srgb: bool, opaque: bool = False) -> np.ndarray:
+    """uint16 working values (h, w, 4) -> uint8 RGBA. ``opaque``: every alpha is 65535 (the
+    sRGB table maps it to 255 already, no separate alpha pass)."""
     if not srgb:
         return _u16_to_u8(w)
     out = _SRGB8_FROM_LIN16[w]
-    out[..., 3] = _u16_to_u8(np.ascontiguousarray(w[..., 3]))
+    if not opaque:
+        out[..., 3] = _u16_to_u8(np.ascontiguousarray(w[..., 3]))
     return out
 
 
@@ -244,13 +246,49 @@ def _premultiplied_means(levels8: list[np.ndarray], srgb: bool) -> list[np.ndarr
     return means
 
 
-def _colour_chain(rgba: np.ndarray, srgb: bool, sizes) -> tuple[list[np.ndarray], np.ndarray]:
+_BAND_TEXELS = 1 << 20  # level-0 texels converted per band (8 MiB of uint16 RGBA)
+
+
+def _first_level_banded(rgba: np.ndarray, lut: np.ndarray, size1: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Level 1 working values straight from uint8 level 0, band by band (level 0's 16-bit
+    copy is never held whole: less memory traffic). Needs integer ratios level 0 / level 1.
+
+    Returns ``(work1 (h1, w1, 4) uint16, mean0 (4,) float64 in 1/255 units)``.
+    """
+    h0, w0 = rgba.shape[:2]
+    w1, h1 = size1
+    ry = h0 // h1
+    rows = max(ry, (_BAND_TEXELS // max(1, w0)) // ry * ry)
+    work1 = np.empty((h1, w1, 4), np.uint16)
+    total = np.zeros(4, np.float64)
+    for r0 in range(0, h0, rows):  # loop over bands of rows, not texels
+        band = cv2.LUT(rgba[r0:r0 + rows], lut)
+        total += cv2.sumElems(band)[:4]
+        out = cv2.resize(band, (w1, band.shape[0] // ry), interpolation=cv2.INTER_AREA)
+        work1[r0 // ry:r0 // ry + out.shape[0]] = out.reshape(out.shape[0], w1, 4)
+    return work1, total / (h0 * w0 * 257.0)
+
+
+def _colour_chain(rgba: np.ndarray, srgb: bool, sizes, opaque: bool) -> tuple[list[np.ndarray], np.ndarray]:
     """Levels and level 0's linear mean per channel (in 1/255 units)."""
-    work0 = _to_work16(rgba, srgb)
-    works = _chain(work0, sizes)
-    level0 = rgba.copy() if rgba.dtype == np.uint8 else _u16_to_u8(rgba)
-    mean0 = np.asarray(cv2.mean(work0)[:4], dtype=np.float64) / 257.0
-    return [level0] + [_encode_work16(w, srgb) for w in works[1:]], mean0
+    if rgba.dtype == np.uint8:
+        level0 = rgba.view()  # shared, read-only view of the caller's array
+    else:
+        level0 = _u16_to_u8(rgba)
+    banded = (rgba.dtype == np.uint8 and len(sizes) > 1
+              and sizes[0][0] % sizes[1][0] == 0 and sizes[0][1] % sizes[1][1] == 0
+              and all(_source_index(sizes, k) != 0 for k in range(2, len(sizes))))
+    if banded:
+        lut = _LUT_SRGB_RGB_LIN_A if srgb else np.stack([_ID16_FROM_8] * 4, axis=-1).reshape(1, 256, 4)
+        work1, mean0 = _first_level_banded(rgba, lut, sizes[1])
+        works = [None, work1]
+        for k in range(2, len(sizes)):
+            works.append(_resize_area(works[_source_index(sizes, k)], sizes[k]))
+    else:
+        work0 = _to_work16(rgba, srgb)
+        works = _chain(work0, sizes)
+        mean0 = np.asarray(cv2.mean(work0)[:4], dtype=np.float64) / 257.0
+    return [level0] + [_encode_work16(w, srgb, opaque) for w in works[1:]], mean0
 
 
 def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str,
@@ -265,7 +303,7 @@ def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str,
     pres = _chain(pre, sizes)          # premultiplied colour + alpha
     straights = _chain(w16[..., :3].copy(), sizes)  # unweighted colour for fully transparent texels
 
-    level0 = rgba.copy() if rgba.dtype == np.uint8 else _u16_to_u8(rgba)
+    level0 = rgba.view() if rgba.dtype == np.uint8 else _u16_to_u8(rgba)
     cutoff8 = None
     coverage: list[float] | None = None
     target = 0.0
@@ -395,11 +433,13 @@ def build_mip_chain(rgba: np.ndarray, role: str, alpha_mode: str = "OPAQUE", alp
     mean0 = None
     if role == ROLE_NORMAL:
         levels = [_encode_normals(u) for u in normal_unit_levels(rgba)]
-    elif role == ROLE_BASE_COLOR and _any_alpha_below_max(rgba):
-        alpha_weighted = True
-        levels, coverage = _premultiplied_chain(rgba, srgb, sizes, alpha_mode, alpha_cutoff)
-    else:  # opaque colour, emissive, metallicRoughness, occlusion
-        levels, mean0 = _colour_chain(rgba, srgb, sizes)
+    else:
+        has_alpha = _any_alpha_below_max(rgba)
+        if role == ROLE_BASE_COLOR and has_alpha:
+            alpha_weighted = True
+            levels, coverage = _premultiplied_chain(rgba, srgb, sizes, alpha_mode, alpha_cutoff)
+        else:  # opaque colour, emissive, metallicRoughness, occlusion
+            levels, mean0 = _colour_chain(rgba, srgb, sizes, opaque=not has_alpha)
     if role == ROLE_BASE_COLOR and alpha_mode == "MASK" and coverage is None:
         # fully opaque texture: every texel passes at every level
         coverage = tuple(1.0 if alpha_cutoff <= 1.0 else 0.0 for _ in levels)
