@@ -319,10 +319,13 @@ def weld_identical(indices: np.ndarray, *streams: np.ndarray | None) -> np.ndarr
     Returns: (M, 3) uint32 indices over the same N vertices.
     """
     tri = np.ascontiguousarray(np.asarray(indices).reshape(-1), dtype=np.uint32)
-    cols = [np.asarray(s).reshape(np.asarray(s).shape[0], -1) for s in streams if s is not None]
-    if tri.size == 0 or not cols:
+    if tri.size == 0:
+        return tri.reshape(-1, 3)
+    cols = [np.asarray(s) for s in streams if s is not None]
+    if not cols:
         return tri.reshape(-1, 3)
     n = cols[0].shape[0]
+    cols = [c.reshape(n, -1) for c in cols]
     # One packed record per vertex: the raw bytes of every stream, side by side.
     packed = np.ascontiguousarray(np.concatenate(
         [np.ascontiguousarray(c).view(np.uint8).reshape(n, -1) for c in cols], axis=1))

@@ -1,0 +1,280 @@
+"""LOD chains: counts down, measured error up, seams closed, borders locked, any frame."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipelines.lod import (
+    DEFAULT_LOD_OPTIONS, LOD_STEP_VERSION, LodOptions, build_lod_chain, reorder_for_lod_prefix)
+
+FAST = LodOptions(error_samples=5000)
+
+
+def _bumpy_sphere(sub: int = 5, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    m = trimesh.creation.icosphere(subdivisions=sub)
+    v = np.asarray(m.vertices, np.float64)
+    rng = np.random.default_rng(seed)
+    k = rng.normal(size=(6, 3)) * 4
+    v = v * (1 + 0.05 * np.sin(v @ k.T).sum(axis=1))[:, None]
+    return v, np.asarray(m.faces, np.uint32)
+
+
+def _load_merged(path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """A corpus file as one mesh: positions f64, faces u32, uv f32|None, normals f32|None."""
+    s = trimesh.load(path, process=False)
+    if isinstance(s, trimesh.Trimesh):
+        s = trimesh.Scene(s)
+    P, F, U, N, off, has_uv, has_n = [], [], [], [], 0, True, True
+    for node in s.graph.nodes_geometry:
+        T, name = s.graph[node]
+        g = s.geometry[name]
+        if not isinstance(g, trimesh.Trimesh) or len(g.faces) == 0:
+            continue
+        v = np.asarray(g.vertices, np.float64) @ T[:3, :3].T + T[:3, 3]
+        f = np.asarray(g.faces, np.int64)
+        if np.linalg.det(T[:3, :3]) < 0:
+            f = f[:, ::-1]
+        uv = getattr(g.visual, "uv", None)
+        if uv is None or len(uv) != len(v):
+            has_uv, uv = False, np.zeros((len(v), 2))
+        n = g._cache.cache.get("vertex_normals")
+        if n is None or len(n) != len(v):
+            has_n, n = False, np.zeros((len(v), 3))
+        else:
+            n = n @ np.linalg.inv(T[:3, :3])
+            n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        P.append(v), F.append(f + off), U.append(uv), N.append(n)
+        off += len(v)
+    return (np.concatenate(P), np.concatenate(F).astype(np.uint32),
+            np.concatenate(U).astype(np.float32) if has_uv else None,
+            np.concatenate(N).astype(np.float32) if has_n else None)
+
+
+def _check_chain(chain, n_vertices, m0):
+    lv = chain.levels
+    assert lv[0].triangles == m0 and lv[0].hausdorff == 0.0 and lv[0].switch_distance == 0.0
+    for prev, cur in zip(lv, lv[1:]):
+        assert cur.triangles < prev.triangles
+        assert cur.triangles <= (1 - DEFAULT_LOD_OPTIONS.min_saving) * prev.triangles
+        assert cur.indices.dtype == np.uint32 and cur.indices.shape == (cur.triangles, 3)
+        assert cur.indices.size == 0 or cur.indices.max() < n_vertices
+        assert cur.switch_distance >= prev.switch_distance
+    for lvl in lv:
+        for x in (lvl.hausdorff, lvl.rms, lvl.hausdorff_rel, lvl.rms_rel, lvl.switch_distance):
+            assert math.isfinite(x) and x >= 0
+
+
+def _assert_error_non_decreasing(chain):
+    for prev, cur in zip(chain.levels, chain.levels[1:]):
+        assert cur.hausdorff_rel >= prev.hausdorff_rel, (prev, cur)
+        assert cur.rms_rel >= prev.rms_rel, (prev, cur)
+
+
+def test_chain_counts_down_and_error_up():
+    v, f = _bumpy_sphere()
+    chain = build_lod_chain(v, f, options=FAST)
+    assert LOD_STEP_VERSION == 1
+    assert len(chain.levels) == 5
+    assert chain.levels[0].indices is not None
+    np.testing.assert_array_equal(chain.levels[0].indices, f)
+    _check_chain(chain, len(v), len(f))
+    _assert_error_non_decreasing(chain)
+    # 1/2, 1/4, 1/8, 1/16 of the input, within a few triangles
+    for lvl, r in zip(chain.levels[1:], DEFAULT_LOD_OPTIONS.ratios[1:]):
+        assert lvl.triangles == pytest.approx(r * len(f), rel=0.02)
+    # switch distance: Hausdorff projects to one pixel at 1080 px, 60 degrees
+    last = chain.levels[-1]
+    assert last.switch_distance == pytest.approx(
+        max(lv.hausdorff for lv in chain.levels) * 540 / math.tan(math.radians(30)))
+    assert last.error_json()["hausdorffRel"] == last.hausdorff_rel
+
+
+def test_input_not_modified_and_deterministic():
+    v, f = _bumpy_sphere(4)
+    v0, f0 = v.copy(), f.copy()
+    a = build_lod_chain(v, f, options=FAST)
+    b = build_lod_chain(v, f, options=FAST)
+    np.testing.assert_array_equal(v, v0)
+    np.testing.assert_array_equal(f, f0)
+    for x, y in zip(a.levels, b.levels):
+        np.testing.assert_array_equal(x.indices, y.indices)
+        assert x.hausdorff == y.hausdorff and x.rms == y.rms
+
+
+@pytest.mark.parametrize("simplifier", ["meshopt", "meshopt-attr", "fast-simplification"])
+def test_simplifiers(simplifier):
+    v, f = _bumpy_sphere(4)
+    uv = (v[:, :2] * 0.5 + 0.5).astype(np.float32)
+    chain = build_lod_chain(v, f, uv=uv, options=LodOptions(simplifier=simplifier, error_samples=3000))
+    assert len(chain.levels) >= 4
+    lv = chain.levels
+    assert all(b.triangles < a.triangles for a, b in zip(lv, lv[1:]))
+    assert all(math.isfinite(x.hausdorff) for x in lv)
+
+
+def test_offset_and_scale_invariance():
+    """Same relative error for the mesh offset by 1e3..1e7 and scaled by 1e-6..1e6.
+
+    Combinations where offset / scale > 1e7 are left out: there the *input* float64
+    coordinates keep less than ~1e-9 of the mesh size (offset 1e7, scale 1e-6 quantises every
+    vertex to 0.2% of the mesh), so it is a different mesh, and greedy simplification of a
+    different mesh legitimately makes different choices.
+    """
+    v, f = _bumpy_sphere(4)
+    v = v + np.random.default_rng(5).normal(size=v.shape) * 2e-3  # no exact ties
+    base = build_lod_chain(v, f, options=FAST)
+    cases = [(o, s) for o in (0.0, 1e3, 1e5, 1e7) for s in (1e-6, 1e-3, 1.0, 1e3, 1e6)
+             if o / s <= 1e7]
+    assert len(cases) >= 14
+    for offset, scale in cases:
+        chain = build_lod_chain(v * scale + offset, f, options=FAST)
+        assert [x.triangles for x in chain.levels] == [x.triangles for x in base.levels]
+        for a, b in zip(base.levels[1:], chain.levels[1:]):
+            assert b.hausdorff_rel == pytest.approx(a.hausdorff_rel, rel=0.05), (offset, scale)
+            assert b.rms_rel == pytest.approx(a.rms_rel, rel=0.05), (offset, scale)
+            assert b.hausdorff == pytest.approx(a.hausdorff * scale, rel=0.05)
+            assert b.switch_distance == pytest.approx(a.switch_distance * scale, rel=0.05)
+            assert b.hausdorff_rel > 0
+
+
+def _border_edges_by_position(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(B, 2) sorted position-id pairs of the edges used by exactly one triangle."""
+    _, pid = np.unique(pos, axis=0, return_inverse=True)
+    t = pid.reshape(-1)[tri.astype(np.int64)]
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    e = e[e[:, 0] != e[:, 1]]
+    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    return uniq[counts == 1]
+
+
+def _border_length(pos, tri):
+    _, first, pid = np.unique(pos, axis=0, return_index=True, return_inverse=True)
+    e = _border_edges_by_position(pos, tri)
+    p = pos[first]
+    return float(np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1).sum())
+
+
+def test_uv_seams_stay_closed_duck(corpus):
+    v, f, uv, n = _load_merged(corpus / "models" / "Duck" / "glTF" / "Duck.gltf")
+    assert uv is not None
+    b0 = _border_edges_by_position(v, f)
+    border_vertices = set(b0.ravel().tolist())
+    chain = build_lod_chain(v, f, uv=uv, normals=n, options=FAST)
+    assert len(chain.levels) == 5
+    _assert_error_non_decreasing(chain)
+    for lvl in chain.levels[1:]:
+        if lvl.sloppy:  # the sloppy fallback clusters by position: no seam guarantee
+            continue
+        b = _border_edges_by_position(v, lvl.indices)
+        # no new holes: every border edge by position runs between original border vertices
+        assert set(b.ravel().tolist()) <= border_vertices, lvl.level
+
+
+def test_locked_borders_bunny(corpus):
+    v, f, _, _ = _load_merged(corpus / "models" / "stanford-bunny" / "stanford-bunny.obj")
+    b0 = _border_edges_by_position(v, f)
+    assert len(b0) > 0  # the bunny has open borders
+    length0 = _border_length(v, f)
+    chain = build_lod_chain(v, f, options=LodOptions(lock_border=True, error_samples=5000))
+    assert len(chain.levels) >= 4
+    _assert_error_non_decreasing(chain)
+    for lvl in chain.levels[1:]:
+        b = _border_edges_by_position(v, lvl.indices)
+        assert set(b.ravel().tolist()) <= set(b0.ravel().tolist())
+        assert _border_length(v, lvl.indices) == pytest.approx(length0, rel=1e-9)
+        assert not lvl.sloppy
+
+
+def test_reorder_for_lod_prefix():
+    v, f = _bumpy_sphere(4)
+    rng = np.random.default_rng(0)
+    perm = rng.permutation(len(v))  # scatter the vertices, add 5 unreferenced ones
+    inv = np.argsort(perm)
+    v2 = np.concatenate([v[perm], np.zeros((5, 3))])
+    f2 = inv[f].astype(np.uint32)
+    chain = build_lod_chain(v2, f2, options=FAST)
+    levels = [lvl.indices for lvl in chain.levels]
+    r = reorder_for_lod_prefix(levels, len(v2))
+    assert sorted(r.order.tolist()) == list(range(len(v2)))
+    np.testing.assert_array_equal(r.order[r.remap], np.arange(len(v2)))
+    counts = r.vertex_counts
+    assert counts[0] == len(v) and all(a >= b for a, b in zip(counts, counts[1:]))
+    new_pos = v2[r.order]
+    for k, (old, new) in enumerate(zip(levels, r.indices)):
+        assert new.dtype == np.uint32
+        assert new.max() < counts[k]
+        np.testing.assert_array_equal(new_pos[new], v2[old])  # same triangles, same corners
+        assert len(np.unique(new)) == counts[k] if k == len(levels) - 1 else True
+    # the unreferenced vertices come last
+    assert set(r.order[counts[0]:].tolist()) == set(range(len(v), len(v) + 5))
+
+
+def _sliver_mesh():
+    v, f = _bumpy_sphere(3)
+    # add slivers (near-collinear), duplicate vertices, a non-manifold fin, an open flap
+    n = len(v)
+    extra = np.array([[2, 0, 0], [3, 0, 0], [4, 1e-9, 0], [2, 0, 0], [0, 0, 2], [0, 1, 2], [1, 0, 2]],
+                     np.float64)
+    v2 = np.concatenate([v, extra])
+    e = f[0]
+    more = np.array([[n, n + 1, n + 2], [n + 3, n + 1, n + 2], [e[0], e[1], n + 4],
+                     [e[1], e[0], n + 5], [e[0], e[1], n + 6], [n + 4, n + 5, n + 6]], np.uint32)
+    return v2, np.concatenate([f, more, f[:5]])  # f[:5]: duplicate faces
+
+
+@pytest.mark.parametrize("simplifier", ["meshopt", "meshopt-attr", "fast-simplification"])
+def test_nasty_inputs_do_not_crash(simplifier):
+    opts = LodOptions(simplifier=simplifier, error_samples=2000)
+    v, f = _sliver_mesh()
+    chain = build_lod_chain(v, f, options=opts)
+    _check_chain(chain, len(v), len(f))
+    # a single triangle, an empty mesh, all-degenerate, a single point, NaN-free tiny mesh
+    tri = np.array([[0, 1, 2]], np.uint32)
+    p3 = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    chain = build_lod_chain(p3, tri, options=opts)
+    assert len(chain.levels) == 1 and chain.levels[0].triangles == 1
+    chain = build_lod_chain(p3, np.zeros((0, 3), np.uint32), options=opts)
+    assert len(chain.levels) == 1 and chain.levels[0].triangles == 0
+    chain = build_lod_chain(np.zeros((0, 3)), np.zeros((0, 3), np.uint32), options=opts)
+    assert len(chain.levels) == 1
+    same = np.zeros((3, 3))
+    chain = build_lod_chain(same, np.repeat(tri, 100, axis=0), options=opts)
+    assert all(math.isfinite(x.hausdorff) for x in chain.levels)
+
+
+def test_target_errors_mode():
+    v, f = _bumpy_sphere(5)
+    chain = build_lod_chain(v, f, options=LodOptions(ratios=(1.0,), target_errors=(0.0, 0.002, 0.01),
+                                                     error_samples=3000))
+    assert len(chain.levels) == 3
+    assert chain.levels[1].triangles > chain.levels[2].triangles
+
+
+def test_options_validated():
+    from assetpipe.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        LodOptions(simplifier="nope")
+    with pytest.raises(ConfigError):
+        LodOptions(ratios=(0.5, 0.25))
+
+
+@pytest.mark.corpus
+def test_corpus_chains(corpus):
+    """Every corpus file: chain invariants, non-decreasing error, closed seams (non-sloppy)."""
+    files = sorted([*corpus.glob("models/*/*.obj"), *corpus.glob("models/*/*.glb"),
+                    *corpus.glob("models/*/glTF/*.gltf")])
+    assert files
+    for path in files:
+        v, f, uv, n = _load_merged(path)
+        chain = build_lod_chain(v, f, uv=uv, normals=n, options=LodOptions(error_samples=20000))
+        _check_chain(chain, len(v), len(f))
+        _assert_error_non_decreasing(chain)
+        b0 = set(_border_edges_by_position(v, f).ravel().tolist())
+        for lvl in chain.levels[1:]:
+            if not lvl.sloppy:
+                assert set(_border_edges_by_position(v, lvl.indices).ravel().tolist()) <= b0, path
