@@ -9,6 +9,10 @@ import click
 
 from assetpipe import __version__
 from assetpipe.errors import AssetpipeError
+from assetpipe.options import DEFAULT_BUILD_OPTIONS
+from pipelines.lod import SIMPLIFIERS
+
+_D = DEFAULT_BUILD_OPTIONS
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -17,34 +21,76 @@ def main() -> None:
     """Content-hashed asset pipeline: glTF 2.0 / OBJ to engine-ready idx/vtx/json."""
 
 
+def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
+                   lock_border: bool, max_texture_size: int | None):
+    """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
+    import dataclasses
+
+    from assetpipe.options import BuildOptions
+
+    d = DEFAULT_BUILD_OPTIONS
+    try:
+        mesh = dataclasses.replace(d.mesh, layout=tuple(a.strip() for a in layout.split(",")))
+        lod = None
+        if not no_lod:
+            changes = {}
+            if lod_ratios:
+                changes["ratios"] = tuple(float(eval_ratio(r)) for r in lod_ratios.split(","))
+            if simplifier:
+                changes["simplifier"] = simplifier
+            if lock_border:
+                changes["lock_border"] = True
+            lod = dataclasses.replace(d.lod, **changes)
+        texture = dataclasses.replace(d.texture, max_size=max_texture_size) if max_texture_size else d.texture
+    except (ValueError, TypeError) as exc:
+        raise click.BadParameter(str(exc)) from None
+    return BuildOptions(mesh=mesh, lod=lod, texture=texture)
+
+
+def eval_ratio(text: str) -> float:
+    """'0.25' or '1/4' -> 0.25 (no eval)."""
+    num, _, den = text.strip().partition("/")
+    return float(num) / float(den) if den else float(num)
+
+
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"),
               show_default=True, help="Output folder.")
 @click.option("--json", "json_report", type=click.Path(path_type=Path), default=None,
               help="Write a JSON report (one entry per input) to this file.")
+@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=1, show_default=True,
+              help="Worker processes for the build steps (outputs are identical for any value).")
+@click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None,
+              help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe].")
+@click.option("--explain", is_flag=True, help="Say, for every step that ran, why it ran.")
 @click.option("-q", "--quiet", is_flag=True, help="Print only failures and the summary line.")
-def build(inputs: tuple[Path, ...], out_dir: Path, json_report: Path | None, quiet: bool) -> None:
+@click.option("--layout", default=",".join(_D.mesh.layout), show_default=True,
+              help="Vertex attributes, comma-separated: position first, then any of uv0, normal, tangent, uv1, color.")
+@click.option("--lod-ratios", default=None, help=f"LOD triangle ratios, e.g. '1,1/2,1/4' [default: {','.join(f'{r:g}' for r in _D.lod.ratios)}].")
+@click.option("--no-lod", is_flag=True, help="Build LOD0 only.")
+@click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None,
+              help=f"LOD simplifier [default: {_D.lod.simplifier}].")
+@click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
+@click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
+              help="Downsize textures so neither side exceeds this (power of two steps).")
+def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
+          simplifier, lock_border, max_texture_size) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
     from assetpipe.build import run_build
-    from assetpipe.model_build import DEFAULT_BUILD_OPTIONS
+    from assetpipe.progress import Reporter
 
-    def on_result(r, n, total):
-        if r.status == "failed":
-            click.echo(f"FAILED  {r.error}", err=True)
-        elif not quiet:
-            extra = f"  ({len(r.warnings)} warning{'s' if len(r.warnings) != 1 else ''})" if r.warnings else ""
-            click.echo(f"[{n}/{total}] {r.status:6s} {r.id}  {r.seconds:.2f}s{extra}")
-
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+    reporter = Reporter(quiet=quiet, explain=explain)
     try:
-        report = run_build(list(inputs), out_dir, DEFAULT_BUILD_OPTIONS, on_result=on_result)
+        with reporter:
+            report = run_build(list(inputs), out_dir, options, jobs=jobs, cache_dir=cache_dir,
+                               on_result=reporter.on_result)
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
     if json_report:
         report.write_json(json_report)
-    counts = report.to_json()["counts"]
-    summary = ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) or "nothing to build"
-    click.echo(f"assetpipe: {summary} in {report.seconds:.2f}s -> {out_dir}")
+    reporter.summary(report, out_dir)
     if report.failed:
         sys.exit(1)
 

@@ -32,6 +32,9 @@ class AssetError(AssetpipeError):
         self.problem = problem
         super().__init__(f"{self.path}: {problem}" if self.path else problem)
 
+    def __reduce__(self):  # survives pickling between build worker processes
+        return (self.__class__, (self.path, self.problem))
+
 
 class MissingFileError(AssetError):
     pass

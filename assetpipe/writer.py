@@ -1,20 +1,31 @@
 """The only code that writes build outputs: atomic file replacement.
 
-Each file is written to a temporary name in the destination folder, flushed, and renamed over
-the final name (``os.replace`` is atomic on POSIX), so a reader — or a build killed at any
-moment — never sees a partial file.
+Each file is written under ``OUT/.assetpipe/tmp/`` (same file system), flushed, and renamed
+over its final name (``os.replace`` is atomic on POSIX), so a reader, or a build killed at
+any moment, never sees a partial output; a temporary left by a killed build lies in the
+hidden folder and is swept by the next build.
 """
 
 from __future__ import annotations
 
 import os
 import tempfile
+import time
 from pathlib import Path
 
+STATE_DIR = ".assetpipe"
 
-def write_atomic(path: Path, data: bytes) -> None:
+
+def tmp_dir(out_dir: Path) -> Path:
+    d = Path(out_dir) / STATE_DIR / "tmp"
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def write_atomic(path: Path, data: bytes, tmp_in: Path | None = None) -> None:
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=tmp_in or path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -30,20 +41,15 @@ def write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def write_outputs(out_dir: Path, files: dict[str, bytes]) -> list[Path]:
-    """Write ``relative name -> bytes`` under ``out_dir``; returns the paths, in the given order.
-
-    A file whose current content is already identical is left untouched (its mtime too).
-    """
-    written = []
-    for rel, data in files.items():
-        path = out_dir / rel
+def sweep_tmp(out_dir: Path, older_than_s: float = 3600.0) -> None:
+    """Remove temporaries left by killed builds (older than an hour: a concurrent build's are young)."""
+    d = Path(out_dir) / STATE_DIR / "tmp"
+    if not d.is_dir():
+        return
+    now = time.time()
+    for p in d.iterdir():
         try:
-            if path.stat().st_size == len(data) and path.read_bytes() == data:
-                written.append(path)
-                continue
-        except FileNotFoundError:
+            if now - p.stat().st_mtime > older_than_s:
+                p.unlink()
+        except OSError:
             pass
-        write_atomic(path, data)
-        written.append(path)
-    return written

@@ -55,7 +55,8 @@ def read_image_file(path: Path, referrer: Path, name: str | None = None) -> Imag
     if size > MAX_IMAGE_FILE_BYTES:
         raise InvalidTextureError(referrer, f"image {path.name!r} is {size} bytes, over the {MAX_IMAGE_FILE_BYTES} limit")
     data = path.read_bytes()
-    return image_from_bytes(data, name or path.name, str(path), referrer, hint=path.suffix)
+    image = image_from_bytes(data, name or path.name, str(path), referrer, hint=path.suffix)
+    return ImageSource(image.name, image.data, image.mime, image.origin, image.digest, path=path)
 
 
 def image_from_bytes(data: bytes, name: str, origin: str, referrer: Path, hint: str = "",

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipelines.model import MeshData, Material
+from pipelines.model import MeshData
 
 MESH_STEP_VERSION = 1
 
@@ -76,21 +76,14 @@ class ProcessedMesh:
         return self.vertices[:, :3]
 
 
-def _uv_sets(mesh: MeshData, material: Material | None) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """(uv for the seed slot, the other set): the slot gets the set the base colour samples."""
-    tex = material.base_color_texture if material is not None else None
-    if tex is not None and tex.tex_coord == 1 and mesh.uv1 is not None:
-        return mesh.uv1, mesh.uv0
-    return mesh.uv0, mesh.uv1
-
-
-def process_mesh(mesh: MeshData, material: Material | None = None,
-                 options: MeshOptions = DEFAULT_MESH_OPTIONS) -> ProcessedMesh:
+def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv_set: int = 0) -> ProcessedMesh:
+    """Process one mesh. ``uv_set``: the UV set the material's base colour texture samples
+    (its ``texCoord``); it goes into the layout's ``uv0`` slot, the other set into ``uv1``."""
     warnings: list[str] = []
     pos = np.asarray(mesh.positions, dtype=np.float64)
     n = pos.shape[0]
     tris = np.asarray(mesh.indices, dtype=np.uint32).reshape(-1, 3)
-    uv_a, uv_b = _uv_sets(mesh, material)
+    uv_a, uv_b = (mesh.uv1, mesh.uv0) if uv_set == 1 and mesh.uv1 is not None else (mesh.uv0, mesh.uv1)
     provided = {"position": pos, "uv0": uv_a, "uv1": uv_b, "normal": mesh.normals,
                 "tangent": mesh.tangents, "color": mesh.colors}
 

@@ -68,6 +68,7 @@ class ImageSource:
     mime: str  # "image/png", "image/jpeg", ... (sniffed from the bytes, not trusted from the file)
     origin: str  # the path read, or "<source file>#images[N]" for embedded images
     digest: str
+    path: Path | None = None  # the image file, or None when embedded in the model file
 
 
 @dataclass(frozen=True)

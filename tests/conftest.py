@@ -25,3 +25,15 @@ def corpus() -> Path:
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_cache(tmp_path_factory):
+    """Builds in tests use a cache of their own, never the user's."""
+    old = os.environ.get("ASSETPIPE_CACHE")
+    os.environ["ASSETPIPE_CACHE"] = str(tmp_path_factory.mktemp("assetpipe-cache"))
+    yield
+    if old is None:
+        os.environ.pop("ASSETPIPE_CACHE", None)
+    else:
+        os.environ["ASSETPIPE_CACHE"] = old

@@ -20,6 +20,11 @@ def run_build(*args: str):
     return result
 
 
+def outputs_of(out: Path) -> list[Path]:
+    """Output files (relative), without the build's own state folder."""
+    return sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file() and ".assetpipe" not in p.parts)
+
+
 def test_box_textured_builds_in_the_seed_layout(corpus, tmp_path):
     out = tmp_path / "out"
     r = run_build(str(corpus / "models/BoxTextured/glTF/BoxTextured.gltf"), "-o", str(out),
@@ -69,8 +74,8 @@ def test_outputs_are_byte_identical_across_runs(corpus, tmp_path):
     src = str(corpus / "models/CesiumMilkTruck/glTF/CesiumMilkTruck.gltf")
     assert run_build(src, "-o", str(tmp_path / "a")).exit_code == 0
     assert run_build(src, "-o", str(tmp_path / "b")).exit_code == 0
-    files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
-    files_b = sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*") if p.is_file())
+    files_a = outputs_of(tmp_path / "a")
+    files_b = outputs_of(tmp_path / "b")
     assert files_a == files_b and files_a
     for rel in files_a:
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
@@ -107,12 +112,12 @@ def test_a_failed_rebuild_keeps_the_earlier_outputs(corpus, tmp_path):
     shutil.copytree(corpus / "models/BoxTextured/glTF", src)
     out = tmp_path / "out"
     assert run_build(str(src / "BoxTextured.gltf"), "-o", str(out)).exit_code == 0
-    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    before = {p: (out / p).read_bytes() for p in outputs_of(out)}
     (src / "BoxTextured0.bin").write_bytes(b"\0" * 10)  # truncated buffer
     r = run_build(str(src / "BoxTextured.gltf"), "-o", str(out))
     assert r.exit_code == 1
     assert "BoxTextured.gltf" in r.output and "Traceback" not in r.output
-    after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    after = {p: (out / p).read_bytes() for p in outputs_of(out)}
     assert after == before
     assert not list(out.rglob("*.tmp"))
 

@@ -1,0 +1,369 @@
+"""The build graph: steps keyed by what they read, looked up in the store, run when missing.
+
+Per model the steps are::
+
+    import ──> mesh ──> lod ──┐
+       └────> texture (per image x role, shared between models) ──> encode ──> materialise
+
+A step's cache key is the digest of: its name and version (:mod:`assetpipe.versions`), its
+options in canonical JSON, the digests of everything it reads (source files, or the blobs of
+the steps before it), and the versions of the libraries it depends on. Because keys use the
+*output* digests of earlier steps, a source edit that changes nothing downstream (say,
+whitespace in a .gltf) stops at the first step whose output is unchanged.
+
+The import step discovers what it reads (.bin, .mtl) only by running; its record lists those
+files with their digests and is valid only while they all still match (as ccache's manifests).
+Images are not import dependencies: a texture edit reruns only the texture steps that read
+that image and the encode steps of the models that use them.
+
+Steps run in phases (import; mesh + textures; lod; encode), each phase's missing steps in
+parallel on a process pool when ``jobs > 1``. Results do not depend on ``jobs``.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from assetpipe import steps, versions
+from assetpipe.hashing import digest_json
+from cache.stat_cache import StatCache
+from cache.store import Store
+
+TEXTURE_DIR = "textures"
+
+
+@dataclass
+class StepRun:
+    """What happened to one step of one asset."""
+
+    step: str
+    ran: bool
+    reason: str | None = None
+
+
+@dataclass
+class AssetState:
+    """One model's way through the graph."""
+
+    source: Path
+    id: str
+    error: str | None = None
+    internal: str | None = None
+    warnings: list[str] = field(default_factory=list)
+    runs: list[StepRun] = field(default_factory=list)
+    key_inputs: dict = field(default_factory=dict)  # step label -> what its key was made of
+    records: dict = field(default_factory=dict)  # step label -> record
+    inputs: dict = field(default_factory=dict)  # absolute path -> digest (everything read)
+    texture_jobs: dict = field(default_factory=dict)  # (material, role) -> texture key
+    outputs: dict = field(default_factory=dict)  # OUT-relative path -> blob digest
+
+    @property
+    def failed(self) -> bool:
+        return self.error is not None
+
+
+def explain(prev: dict | None, now: dict, hit_missing: bool = True) -> str:
+    """Why a step ran: the first difference between its previous and current key inputs."""
+    if not prev:
+        return "new"
+    if prev.get("version") != now.get("version"):
+        return f"step version changed ({prev.get('version')} -> {now.get('version')})"
+    changed = [k for k in sorted(set(now.get("inputs", {})) | set(prev.get("inputs", {})))
+               if now.get("inputs", {}).get(k) != prev.get("inputs", {}).get(k)]
+    if changed:
+        return "input changed: " + ", ".join(changed)
+    opts_now, opts_prev = now.get("options") or {}, prev.get("options") or {}
+    if not isinstance(opts_now, dict) or not isinstance(opts_prev, dict):
+        if opts_now != opts_prev:
+            return "options changed"
+    else:
+        changed = [k for k in sorted(set(opts_now) | set(opts_prev)) if opts_now.get(k) != opts_prev.get(k)]
+        if changed:
+            return "option changed: " + ", ".join(changed)
+    if prev.get("libs") != now.get("libs"):
+        libs = [k for k in sorted(now.get("libs", {})) if now["libs"].get(k) != prev.get("libs", {}).get(k)]
+        return "library version changed: " + ", ".join(libs)
+    return "not in the cache (evicted, corrupt, or built elsewhere)"
+
+
+class Executor:
+    """Runs task calls inline (jobs == 1) or on a process pool; results in call order."""
+
+    def __init__(self, jobs: int):
+        self.jobs = max(1, int(jobs))
+        self.pool = ProcessPoolExecutor(self.jobs) if self.jobs > 1 else None
+
+    def map(self, calls: list[tuple]) -> list[tuple[str, object]]:
+        if self.pool is None or len(calls) <= 1:
+            return [steps.call_task(fn, *args) for fn, *args in calls]
+        futures = [self.pool.submit(steps.call_task, fn, *args) for fn, *args in calls]
+        out = []
+        for f in futures:
+            try:
+                out.append(f.result())
+            except BrokenProcessPool:
+                out.append(("internal", "a build worker process crashed (killed or a native library fault)"))
+                self._restart()
+        return out
+
+    def _restart(self):
+        try:
+            self.pool.shutdown(wait=False, cancel_futures=True)
+        except Exception:
+            pass
+        self.pool = ProcessPoolExecutor(self.jobs)
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+
+
+class Graph:
+    def __init__(self, store: Store, stat_cache: StatCache, options, previous: dict, jobs: int = 1):
+        """``options``: :class:`assetpipe.options.BuildOptions`; ``previous``: the last build's
+        per-source step key inputs (for explanations), from the output state."""
+        self.store = store
+        self.stat = stat_cache
+        self.options = options
+        self.previous = previous
+        self.libs = versions.library_versions()
+        self.executor = Executor(jobs)
+        self.mesh_opts = steps.options_to_json(options.mesh)
+        self.lod_opts = steps.options_to_json(options.lod)
+        self.tex_opts = steps.options_to_json(options.texture)
+        self.layout = list(options.mesh.layout)
+
+    # -- keys ---------------------------------------------------------------------------
+    def _key_inputs(self, step: str, inputs: dict, opts) -> dict:
+        return {"step": step, "version": versions.STEP_VERSIONS[step], "inputs": inputs, "options": opts,
+                "libs": self.libs}
+
+    def _run_phase(self, jobs: list[tuple[list[AssetState], str, dict, tuple]]) -> dict[str, dict | None]:
+        """jobs: (assets, step label, key inputs, task call). Looks each key up, runs the
+        missing ones (each key once), stores records. Returns key -> record (None: failed)."""
+        results: dict[str, dict | None] = {}
+        to_run: dict[str, tuple] = {}
+        owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
+        for assets, label, kin, call in jobs:
+            key = digest_json(kin)
+            for a in assets:
+                owners.setdefault(key, []).append((a, label, kin))
+                a.key_inputs[label] = kin
+            if key in results or key in to_run:
+                continue
+            rec = self.store.get_record(key)
+            if rec is not None:
+                results[key] = rec
+            else:
+                to_run[key] = call
+        keys = list(to_run)
+        for key, (status, value) in zip(keys, self.executor.map([to_run[k] for k in keys])):
+            if status == "ok":
+                self.store.put_record(key, value)
+                results[key] = value
+            else:
+                results[key] = None
+                for a, label, _ in owners[key]:
+                    if label.startswith("texture"):
+                        a.warnings.append(f"{label} skipped: {value if status == 'asset' else 'internal error'}")
+                        if status == "internal":
+                            a.warnings.append(str(value))
+                    elif status == "asset":
+                        a.error = str(value)
+                    else:
+                        a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
+                        a.internal = str(value)
+        for key, owner_list in owners.items():
+            for a, label, kin in owner_list:
+                ran = key in to_run
+                prev = self.previous.get(str(a.source), {}).get(label)
+                a.runs.append(StepRun(label, ran, explain(prev, kin) if ran else None))
+                a.records[label] = results.get(key)
+        return results
+
+    # -- the phases ---------------------------------------------------------------------
+    def build(self, assets: list[AssetState]) -> None:
+        try:
+            self._import(assets)
+            live = [a for a in assets if not a.failed]
+            self._mesh_and_textures(live)
+            live = [a for a in live if not a.failed]
+            self._lod(live)
+            live = [a for a in live if not a.failed]
+            self._encode(live)
+        finally:
+            self.executor.close()
+
+    def _import(self, assets: list[AssetState]) -> None:
+        jobs = []
+        for a in assets:
+            try:
+                src_digest = self.stat.digest(a.source)
+            except FileNotFoundError:
+                a.error = f"{a.source}: file not found"
+                continue
+            a.inputs[str(a.source.resolve())] = src_digest
+            kin = self._key_inputs("import", {"source": src_digest}, None)
+            key = digest_json(kin)
+            rec = self.store.get_record(key)
+            if rec is not None and not self._deps_match(a, rec):
+                rec = None
+            if rec is not None:
+                a.key_inputs["import"] = kin
+                a.records["import"] = rec
+                a.runs.append(StepRun("import", False))
+                continue
+            jobs.append(([a], "import", kin, (steps.task_import, str(self.store.root), str(a.source))))
+        if jobs:  # a record under the same key may exist but be stale (a .bin changed): overwrite
+            self._run_uncached(jobs)
+        for a in assets:
+            rec = a.records.get("import")
+            if rec is not None:
+                base = a.source.parent
+                for d in rec["meta"]["deps"]:
+                    a.inputs[str((base / d["path"]).resolve())] = d["digest"]
+
+    def _deps_match(self, a: AssetState, rec: dict) -> bool:
+        base = a.source.parent
+        for d in rec["meta"]["deps"]:
+            try:
+                if self.stat.digest(base / d["path"]) != d["digest"]:
+                    return False
+            except (FileNotFoundError, NotADirectoryError):
+                return False
+        return True
+
+    def _run_uncached(self, jobs) -> dict:
+        """Like _run_phase but never looks the key up (the caller already decided to run)."""
+        results = {}
+        keys = [digest_json(kin) for _, _, kin, _ in jobs]
+        outs = self.executor.map([call for _, _, _, call in jobs])
+        for key, (assets, label, kin, _), (status, value) in zip(keys, jobs, outs):
+            for a in assets:
+                a.key_inputs[label] = kin
+                prev = self.previous.get(str(a.source), {}).get(label)
+                a.runs.append(StepRun(label, True, explain(prev, kin)))
+                if status == "ok":
+                    a.records[label] = value
+                elif status == "asset":
+                    a.error = str(value)
+                else:
+                    a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
+                    a.internal = str(value)
+            if status == "ok":
+                self.store.put_record(key, value)
+                results[key] = value
+        return results
+
+    def _mesh_and_textures(self, assets: list[AssetState]) -> None:
+        jobs = []
+        for a in assets:
+            imp = a.records["import"]
+            blob = imp["blobs"]["import"]
+            kin = self._key_inputs("mesh", {"import": blob}, self.mesh_opts)
+            jobs.append(([a], "mesh", kin, (steps.task_mesh, str(self.store.root), blob, self.mesh_opts)))
+            images = imp["meta"]["images"]
+            base = a.source.parent
+            for mi, mat in enumerate(imp["meta"]["materials"]):
+                for role, tex in mat["textures"].items():
+                    image = dict(images[tex["image"]])
+                    if image["path"] is not None:
+                        p = base / image["path"]
+                        try:
+                            image["digest"] = self.stat.digest(p)
+                        except FileNotFoundError:
+                            a.warnings.append(f"material {mi} ({mat['name']}): image {image['path']!r} disappeared; texture skipped")
+                            continue
+                        a.inputs[str(p.resolve())] = image["digest"]
+                    alpha = mat["alphaMode"] if role == "baseColor" else "OPAQUE"
+                    cutoff = mat["alphaCutoff"] if alpha == "MASK" else 0.5
+                    tin = {"image": image["digest"], "role": role, "alphaMode": alpha, "alphaCutoff": cutoff}
+                    kin = self._key_inputs("texture", tin, self.tex_opts)
+                    label = f"texture {image['name']} ({role})"
+                    a.texture_jobs[(mi, role)] = label
+                    jobs.append(([a], label, kin, (steps.task_texture, str(self.store.root), image, str(base),
+                                                   role, alpha, cutoff, self.tex_opts)))
+        self._run_phase(jobs)
+
+    def _lod(self, assets: list[AssetState]) -> None:
+        jobs = []
+        for a in assets:
+            blob = a.records["mesh"]["blobs"]["mesh"]
+            opts = {"lod": self.lod_opts, "layout": self.layout}
+            kin = self._key_inputs("lod", {"mesh": blob}, opts)
+            jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, self.layout, self.lod_opts)))
+        self._run_phase(jobs)
+
+    def _materials(self, a: AssetState) -> tuple[list[dict], dict[str, str]]:
+        """The encode step's material list, and the texture files (OUT path -> blob)."""
+        imp = a.records["import"]["meta"]
+        files: dict[str, str] = {}
+        out = []
+        mats = list(imp["materials"])
+        for mi, mat in enumerate(mats):
+            textures, texture_path = {}, ""
+            transparent = mat["alphaMode"] == "BLEND"
+            for role, tex in mat["textures"].items():
+                label = a.texture_jobs.get((mi, role))
+                rec = a.records.get(label) if label else None
+                if rec is None:
+                    continue
+                m = rec["meta"]
+                png = f"{TEXTURE_DIR}/{rec['blobs']['level0'].split(':', 1)[1][:20]}{m['level0Ext']}"
+                ktx = f"{TEXTURE_DIR}/{rec['blobs']['ktx2'].split(':', 1)[1][:20]}.ktx2"
+                files[png] = rec["blobs"]["level0"]
+                files[ktx] = rec["blobs"]["ktx2"]
+                textures[role] = {"path": png, "ktx2": ktx, "width": m["width"], "height": m["height"],
+                                  "levels": m["levels"], "colorSpace": m["colorSpace"], "vkFormat": m["vkFormat"],
+                                  "texCoord": tex["texCoord"], "sampler": tex["sampler"],
+                                  "source": imp["images"][tex["image"]]["name"],
+                                  "meanDrift": m["meanDrift"], "coverage": m["coverage"]}
+                if role == "baseColor":
+                    texture_path = png
+                    transparent = transparent or m["hasAlphaBelow255"]
+            out.append({"name": mat["name"], "baseColorFactor": mat["baseColorFactor"], "alphaMode": mat["alphaMode"],
+                        "alphaCutoff": mat["alphaCutoff"], "doubleSided": mat["doubleSided"],
+                        "transparent": bool(transparent), "texturePath": texture_path, "textures": textures})
+        if any(not 0 <= m < len(mats) for m in imp["meshMaterials"]):
+            # meshes without a material (or an invalid one) use a default one, appended last
+            out.append({"name": "default", "baseColorFactor": [1.0, 1.0, 1.0, 1.0], "alphaMode": "OPAQUE",
+                        "alphaCutoff": 0.5, "doubleSided": False, "transparent": False, "texturePath": "",
+                        "textures": {}})
+        return out, files
+
+    def _encode(self, assets: list[AssetState]) -> None:
+        jobs = []
+        for a in assets:
+            lod_blob = a.records["lod"]["blobs"]["lod"]
+            materials, tex_files = self._materials(a)
+            a.outputs.update(tex_files)
+            sources = self._sources(a)
+            warnings = list(dict.fromkeys(list(a.records["import"]["meta"]["warnings"]) + a.warnings))
+            tin = {"lod": lod_blob, "materials": digest_json(materials), "sources": digest_json(sources),
+                   "warnings": digest_json(warnings)}
+            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": self.layout})
+            jobs.append(([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, self.layout,
+                                              materials, sources, warnings)))
+        self._run_phase(jobs)
+        for a in assets:
+            rec = a.records.get("encode")
+            if rec is not None:
+                a.outputs.update(rec["blobs"])
+                a.warnings = list(rec["meta"]["warnings"])
+
+    def _sources(self, a: AssetState) -> list[dict]:
+        base = a.source.parent.resolve()
+        out = []
+        for path, digest in a.inputs.items():
+            p = Path(path)
+            try:
+                rel = p.relative_to(base).as_posix()
+            except ValueError:
+                rel = os.path.relpath(p, base)
+            out.append({"path": rel, "digest": digest})
+        first = [s for s in out if s["path"] == a.source.name]
+        return first + sorted((s for s in out if s["path"] != a.source.name), key=lambda s: s["path"])

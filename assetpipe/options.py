@@ -1,0 +1,28 @@
+"""The build's options: one frozen dataclass per step, gathered in :class:`BuildOptions`.
+
+The CLI reads its defaults from these module-level defaults. ``lod=None`` builds LOD0 only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from pipelines.lod import DEFAULT_LOD_OPTIONS, LodOptions
+from pipelines.mesh_process import DEFAULT_MESH_OPTIONS, MeshOptions
+from pipelines.texture_mips import DEFAULT_TEXTURE_OPTIONS, TextureOptions
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    mesh: MeshOptions = DEFAULT_MESH_OPTIONS
+    lod: LodOptions | None = DEFAULT_LOD_OPTIONS
+    texture: TextureOptions = DEFAULT_TEXTURE_OPTIONS
+
+    def to_json(self) -> dict:
+        return {"mesh": dataclasses.asdict(self.mesh),
+                "lod": dataclasses.asdict(self.lod) if self.lod is not None else None,
+                "texture": dataclasses.asdict(self.texture)}
+
+
+DEFAULT_BUILD_OPTIONS = BuildOptions()

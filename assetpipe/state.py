@@ -1,0 +1,129 @@
+"""What the last build wrote into an output folder, and the no-op check against it.
+
+``OUT/.assetpipe/state.json`` holds, per source (absolute path): its id, the digests of every
+file its build read, and every output it owns (path relative to OUT, blob digest, size,
+mtime_ns). ``OUT/.assetpipe/explain.json`` holds the last key inputs of every step, read only
+to explain why a step reruns. Both are written atomically at the end of a build.
+
+The no-op path runs on this module, the stat cache and xxhash only: no numpy, no pillow, no
+importer, no renderer.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from assetpipe.hashing import digest_file
+from assetpipe.writer import STATE_DIR, tmp_dir, write_atomic
+
+STATE_VERSION = 1
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_bytes())
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+class OutputState:
+    def __init__(self, out_dir: Path):
+        self.out_dir = Path(out_dir)
+        self.path = self.out_dir / STATE_DIR / "state.json"
+        data = _read_json(self.path)
+        if data.get("version") != STATE_VERSION:
+            data = {}
+        self.assets: dict[str, dict] = data.get("assets", {})
+        self._owned_at_load = {rel for e in self.assets.values() for rel in e.get("outputs", {})}
+
+    def load_explain(self) -> dict:
+        data = _read_json(self.out_dir / STATE_DIR / "explain.json")
+        return data.get("steps", {}) if data.get("version") == STATE_VERSION else {}
+
+    def save(self, explain_steps: dict | None) -> None:
+        body = {"version": STATE_VERSION, "assets": self.assets}
+        tmp = tmp_dir(self.out_dir)
+        write_atomic(self.path, json.dumps(body, separators=(",", ":"), sort_keys=True).encode(), tmp)
+        if explain_steps is not None:
+            write_atomic(self.out_dir / STATE_DIR / "explain.json",
+                         json.dumps({"version": STATE_VERSION, "steps": explain_steps},
+                                    separators=(",", ":"), sort_keys=True).encode(), tmp)
+
+    # -- the no-op check ----------------------------------------------------------------
+    def check(self, source: Path, model_id: str, options_digest: str, stat_cache) -> str | None:
+        """None when ``source``'s outputs are up to date; otherwise why not."""
+        entry = self.assets.get(str(source.resolve()))
+        if entry is None:
+            return "new"
+        if entry.get("options") != options_digest:
+            return "options or versions changed"
+        if entry.get("id") != model_id:
+            return f"id changed ({entry.get('id')} -> {model_id})"
+        for path, digest in entry["inputs"].items():
+            try:
+                if stat_cache.digest(path) != digest:
+                    return f"input changed: {os.path.basename(path)}"
+            except FileNotFoundError:
+                return f"input missing: {os.path.basename(path)}"
+        for rel, (digest, size, mtime_ns) in entry["outputs"].items():
+            p = self.out_dir / rel
+            try:
+                st = os.stat(p)
+            except FileNotFoundError:
+                return f"output missing: {rel}"
+            if st.st_size == size and st.st_mtime_ns == mtime_ns:
+                continue
+            if st.st_size != size or digest_file(p) != digest:
+                return f"output modified: {rel}"
+            entry["outputs"][rel] = [digest, st.st_size, st.st_mtime_ns]  # touched, same bytes
+        return None
+
+    # -- after a build ------------------------------------------------------------------
+    def materialise(self, store, outputs: dict[str, str], previous: dict | None) -> tuple[dict, list[str]]:
+        """Put every output (OUT path -> blob digest) in place; returns the new output table
+        and notes on outputs restored because they were missing or modified."""
+        table, notes = {}, []
+        prev = (previous or {}).get("outputs", {})
+        tmp = tmp_dir(self.out_dir)
+        for rel in sorted(outputs):
+            digest = outputs[rel]
+            p = self.out_dir / rel
+            try:
+                st = os.stat(p)
+                same = (prev.get(rel, [None])[0] == digest and st.st_size == prev[rel][1]
+                        and st.st_mtime_ns == prev[rel][2]) or digest_file(p) == digest
+                if same:
+                    table[rel] = [digest, st.st_size, st.st_mtime_ns]
+                    continue
+                if rel in prev and prev[rel][0] == digest:
+                    notes.append(f"output modified, restored: {rel}")
+            except FileNotFoundError:
+                if rel in prev:
+                    notes.append(f"output missing, restored: {rel}")
+            data = store.get_blob(digest)
+            if data is None:
+                raise FileNotFoundError(f"blob {digest} for {rel} vanished from the cache")
+            write_atomic(p, data, tmp)
+            st = os.stat(p)
+            table[rel] = [digest, st.st_size, st.st_mtime_ns]
+        return table, notes
+
+    def forget_missing_sources(self) -> list[str]:
+        """Drop the entries of sources that no longer exist (deleted or renamed); their ids."""
+        gone = [s for s in self.assets if not os.path.exists(s)]
+        return [self.assets.pop(s)["id"] for s in gone]
+
+    def delete_unowned_outputs(self) -> list[str]:
+        """Delete outputs the state owned when loaded and no entry owns now."""
+        owned = {rel for e in self.assets.values() for rel in e["outputs"]}
+        removed = []
+        for rel in sorted(self._owned_at_load - owned):
+            try:
+                (self.out_dir / rel).unlink()
+                removed.append(rel)
+            except FileNotFoundError:
+                pass
+        return removed

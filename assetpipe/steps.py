@@ -1,0 +1,274 @@
+"""The build's steps as tasks: each reads its inputs from the store (or a source file), runs
+the pure pipeline function, and writes its outputs to the store as blobs.
+
+Every task takes only plain, picklable arguments (paths, digests, option dicts), so the
+graph can run it in this process or in a worker process. Each returns a *record*:
+``{"blobs": {name: digest}, "meta": {...}}``. Tasks never raise for a bad asset: the caller
+wraps them with :func:`call_task`, which turns an :class:`AssetError` into a result.
+
+Step versions live in :mod:`assetpipe.versions`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+from assetpipe import __version__
+from assetpipe.errors import AssetError
+from cache.serialize import pack, unpack
+from cache.store import Store
+
+def call_task(fn, *args) -> tuple[str, object]:
+    """Run a task; ("ok", record) | ("asset", "path: problem") | ("internal", traceback)."""
+    try:
+        return "ok", fn(*args)
+    except AssetError as exc:
+        return "asset", str(exc)
+    except MemoryError:
+        return "asset", "out of memory"
+    except Exception as exc:  # a bug of ours
+        return "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+
+
+def options_from_json(cls, data: dict | None):
+    if data is None:
+        return None
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for k, v in data.items():
+        if k in fields:
+            kwargs[k] = tuple(v) if isinstance(v, list) else v
+    return cls(**kwargs)
+
+
+def options_to_json(opts) -> dict | None:
+    if opts is None:
+        return None
+    return dataclasses.asdict(opts)
+
+
+# -- import ---------------------------------------------------------------------------------
+
+def _relative(path: Path, base: Path) -> str:
+    try:
+        return Path(path).resolve().relative_to(base.resolve()).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def task_import(store_root: str, source: str) -> dict:
+    """Import a model file; store its geometry and materials (and embedded images)."""
+    from assetpipe.hashing import digest_file
+    from assetpipe.model_import import import_model
+
+    store = Store(Path(store_root))
+    src = Path(source)
+    model = import_model(src)
+    base = src.parent
+    images: list[dict] = []
+    image_index: dict[tuple, int] = {}
+    blobs: dict[str, str] = {}
+
+    def image_ref(ref) -> int:
+        img = ref.image
+        key = (img.digest, str(img.path) if img.path else None)
+        if key not in image_index:
+            entry = {"name": img.name, "mime": img.mime, "digest": img.digest,
+                     "path": _relative(img.path, base) if img.path is not None else None}
+            if img.path is None:
+                blobs[f"image:{img.digest}"] = store.put_blob(img.data)
+            image_index[key] = len(images)
+            images.append(entry)
+        return image_index[key]
+
+    materials = []
+    for m in model.materials:
+        textures = {role: {"image": image_ref(ref), "texCoord": ref.tex_coord, "sampler": ref.sampler.to_json()}
+                    for role, ref in m.textures().items()}
+        materials.append({"name": m.name, "baseColorFactor": list(m.base_color_factor),
+                          "alphaMode": m.alpha_mode, "alphaCutoff": m.alpha_cutoff,
+                          "doubleSided": m.double_sided, "metallicFactor": m.metallic_factor,
+                          "roughnessFactor": m.roughness_factor, "emissiveFactor": list(m.emissive_factor),
+                          "textures": textures})
+    arrays: dict[str, np.ndarray] = {}
+    meshes = []
+    for i, mesh in enumerate(model.meshes):
+        attrs = []
+        for name in ("positions", "indices", "uv0", "uv1", "normals", "tangents", "colors"):
+            arr = getattr(mesh, name)
+            if arr is not None:
+                arrays[f"{i}.{name}"] = arr
+                attrs.append(name)
+        meshes.append({"name": mesh.name, "material": mesh.material, "attributes": attrs})
+    image_paths = {(base / im["path"]).resolve() for im in images if im["path"] is not None}
+    deps = [{"path": _relative(d, base), "digest": digest_file(d)}
+            for d in model.dependencies if Path(d).resolve() not in image_paths]
+    meta = {"materials": materials, "meshes": meshes, "images": images, "warnings": list(model.warnings)}
+    blobs["import"] = store.put_blob(pack(meta, arrays))
+    return {"blobs": blobs, "meta": {"deps": deps, "images": images, "materials": materials,
+                                     "meshMaterials": [m.material for m in model.meshes],
+                                     "warnings": list(model.warnings)}}
+
+
+def load_import(store: Store, digest: str):
+    """(meta, list of MeshData) from an import blob."""
+    from pipelines.model import MeshData
+
+    data = store.get_blob(digest)
+    if data is None:
+        raise FileNotFoundError(digest)
+    meta, arrays = unpack(data)
+    meshes = []
+    for i, m in enumerate(meta["meshes"]):
+        get = lambda n: arrays.get(f"{i}.{n}")  # noqa: E731
+        meshes.append(MeshData(name=m["name"], positions=get("positions"), indices=get("indices"),
+                               material=m["material"], uv0=get("uv0"), uv1=get("uv1"), normals=get("normals"),
+                               tangents=get("tangents"), colors=get("colors")))
+    return meta, meshes
+
+
+# -- mesh processing ------------------------------------------------------------------------
+
+def task_mesh(store_root: str, import_digest: str, mesh_options: dict) -> dict:
+    from pipelines.mesh_process import MeshOptions, process_mesh
+
+    store = Store(Path(store_root))
+    opts = options_from_json(MeshOptions, mesh_options)
+    meta, meshes = load_import(store, import_digest)
+    mats = meta["materials"]
+    out_meta, arrays = [], {}
+    for i, mesh in enumerate(meshes):
+        mat = mats[mesh.material] if 0 <= mesh.material < len(mats) else None
+        uv_set = mat["textures"].get("baseColor", {}).get("texCoord", 0) if mat else 0
+        pm = process_mesh(mesh, opts, uv_set=uv_set)
+        arrays[f"{i}.vertices"] = pm.vertices
+        arrays[f"{i}.indices"] = pm.indices
+        out_meta.append({"name": pm.name, "material": pm.material, "degenerate": pm.degenerate_dropped,
+                         "welded": pm.welded, "warnings": list(pm.warnings), "hasUv": mesh.uv0 is not None})
+    blob = store.put_blob(pack({"meshes": out_meta}, arrays))
+    return {"blobs": {"mesh": blob}, "meta": {}}
+
+
+# -- LOD ------------------------------------------------------------------------------------
+
+def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None) -> dict:
+    """LOD chain per mesh, vertices reordered so that coarser levels use a prefix."""
+    from pipelines.lod import LodOptions, build_lod_chain, reorder_for_lod_prefix
+    from pipelines.mesh_process import ATTRIBUTE_COMPONENTS
+
+    store = Store(Path(store_root))
+    data = store.get_blob(mesh_digest)
+    if data is None:
+        raise FileNotFoundError(mesh_digest)
+    meta, arrays = unpack(data)
+    opts = options_from_json(LodOptions, lod_options)
+    cols, c = {}, 0
+    for name in layout:
+        cols[name] = slice(c, c + ATTRIBUTE_COMPONENTS[name])
+        c += ATTRIBUTE_COMPONENTS[name]
+    out_arrays, out_meta = {}, []
+    for i, m in enumerate(meta["meshes"]):
+        verts, idx = arrays[f"{i}.vertices"], arrays[f"{i}.indices"]
+        if opts is None or idx.shape[0] == 0:
+            levels_meta = [{"error": None, "switchDistance": 0.0, "vertexCount": int(verts.shape[0])}]
+            out_arrays[f"{i}.vertices"] = verts
+            out_arrays[f"{i}.lod0"] = idx
+        else:
+            uv = verts[:, cols["uv0"]] if "uv0" in cols and m.get("hasUv") else None
+            normals = verts[:, cols["normal"]] if "normal" in cols else None
+            chain = build_lod_chain(verts[:, :3], idx, uv=uv, normals=normals, options=opts)
+            order = reorder_for_lod_prefix([lv.indices for lv in chain.levels], verts.shape[0])
+            out_arrays[f"{i}.vertices"] = verts[order.order]
+            levels_meta = []
+            for k, (lv, new_idx, count) in enumerate(zip(chain.levels, order.indices, order.vertex_counts)):
+                out_arrays[f"{i}.lod{k}"] = new_idx
+                levels_meta.append({"error": lv.error_json() if k else None, "sloppy": lv.sloppy,
+                                    "switchDistance": lv.switch_distance, "vertexCount": count})
+        out_meta.append({**m, "lods": levels_meta})
+    blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
+    return {"blobs": {"lod": blob}, "meta": {}}
+
+
+# -- textures -------------------------------------------------------------------------------
+
+def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_mode: str,
+                 alpha_cutoff: float, texture_options: dict) -> dict:
+    from assetpipe.errors import MissingFileError
+    from assetpipe.hashing import digest_bytes
+    from pipelines.model import ImageSource
+    from pipelines.texture_mips import TextureOptions
+    from pipelines.texture_process import process_texture
+
+    store = Store(Path(store_root))
+    if image["path"] is not None:
+        path = Path(model_dir) / image["path"]
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            raise MissingFileError(path, "image disappeared during the build") from None
+    else:
+        data = store.get_blob(image["digest"])
+        if data is None:
+            raise FileNotFoundError(image["digest"])
+    src = ImageSource(name=image["name"], data=data, mime=image["mime"], origin=image["path"] or image["name"],
+                      digest=digest_bytes(data))
+    pt = process_texture(src, role, alpha_mode, alpha_cutoff, options_from_json(TextureOptions, texture_options))
+    blobs = {"ktx2": store.put_blob(pt.ktx2), "level0": store.put_blob(pt.level0)}
+    meta = {"width": pt.width, "height": pt.height, "levels": pt.levels, "vkFormat": pt.vk_format,
+            "colorSpace": pt.color_space, "level0Ext": pt.level0_ext, "level0Shared": pt.level0_shared,
+            "hasAlphaBelow255": pt.has_alpha_below_255, "meanDrift": list(pt.mean_drift),
+            "coverage": list(pt.coverage) if pt.coverage is not None else None,
+            "sourceDigest": src.digest}
+    return {"blobs": blobs, "meta": meta}
+
+
+# -- encode ---------------------------------------------------------------------------------
+
+def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[str],
+                materials: list[dict], sources: list[dict], warnings: list[str]) -> dict:
+    """Encode the output files of one model; each file becomes a blob."""
+    from assetpipe.format import OutputLod, OutputMaterial, OutputMesh, encode_model
+    from pipelines.mesh_process import ATTRIBUTE_COMPONENTS
+
+    store = Store(Path(store_root))
+    data = store.get_blob(lod_digest)
+    if data is None:
+        raise FileNotFoundError(lod_digest)
+    meta, arrays = unpack(data)
+    warnings = list(warnings)
+    n_mats = len(materials)
+    meshes = []
+    degenerate = welded = 0
+    for i, m in enumerate(meta["meshes"]):
+        warnings.extend(m["warnings"])
+        degenerate += m["degenerate"]
+        welded += m["welded"]
+        lods = tuple(OutputLod(indices=arrays[f"{i}.lod{k}"], vertex_count=lv["vertexCount"],
+                               error=lv["error"] or {}, switch_distance=lv["switchDistance"])
+                     for k, lv in enumerate(m["lods"]))
+        if lods[0].indices.shape[0] == 0:
+            warnings.append(f"{m['name']}: no triangles left after dropping degenerate ones; mesh skipped")
+            continue
+        mat = m["material"] if 0 <= m["material"] < n_mats else n_mats - 1
+        meshes.append(OutputMesh(id=m["name"], name=m["name"], material_id=f"{model_id}-mat-{mat}",
+                                 vertices=arrays[f"{i}.vertices"], lods=lods))
+    if not meshes:
+        warnings.append("the model has no triangle geometry: its outputs hold no meshes")
+    out_mats = [OutputMaterial(id=f"{model_id}-mat-{i}", name=m["name"], color=tuple(m["baseColorFactor"]),
+                               texture_path=m["texturePath"], alpha_mode=m["alphaMode"],
+                               alpha_cutoff=m["alphaCutoff"], double_sided=m["doubleSided"],
+                               transparent=m["transparent"], textures=m["textures"])
+                for i, m in enumerate(materials)]
+    stats = {"meshes": len(meshes), "triangles": int(sum(x.lods[0].indices.shape[0] for x in meshes)),
+             "vertices": int(sum(x.vertices.shape[0] for x in meshes)),
+             "degenerateTriangles": degenerate, "weldedVertices": welded,
+             "lodLevels": max((len(x.lods) for x in meshes), default=0)}
+    files = encode_model(model_id, meshes, out_mats, tuple(layout), ATTRIBUTE_COMPONENTS, stats=stats,
+                         warnings=list(dict.fromkeys(warnings)), sources=sources,
+                         generator=f"assetpipe {__version__}")
+    return {"blobs": {name: store.put_blob(b) for name, b in files.items()},
+            "meta": {"stats": stats, "warnings": list(dict.fromkeys(warnings))}}
