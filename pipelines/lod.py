@@ -75,6 +75,8 @@ class LodOptions:
     resolution_px, fov_y_deg: the reference view for ``switch_distance`` (vertical pixels
       and vertical field of view).
     error_samples, error_seed: area-weighted samples per side for the error measurement.
+    measure: False skips the measurement (errors and switch distances are NaN then): for
+      timing and previews only, never for output.
     """
 
     ratios: tuple[float, ...] = (1.0, 1 / 2, 1 / 4, 1 / 8, 1 / 16)
@@ -92,6 +94,7 @@ class LodOptions:
     fov_y_deg: float = 60.0
     error_samples: int = 50_000
     error_seed: int = 0
+    measure: bool = True
 
     def __post_init__(self) -> None:
         from assetpipe.errors import ConfigError
@@ -129,7 +132,8 @@ class LodLevel:
       hausdorff_rel, rms_rel: the same as fractions of level 0's bounding-box diagonal.
     switch_distance: view distance (model units) from which this level's error projects to
       at most one pixel: max Hausdorff of levels 0..k * (resolution/2) / tan(fov/2).
-    sloppy: whether the sloppy fallback made this level.
+    sloppy: whether the sloppy fallback made this level. Sloppy clustering ignores UV seams
+      and borders, so this level and every coarser one (simplified from it) may have cracks.
     """
 
     level: int
@@ -272,7 +276,11 @@ def build_lod_chain(
     # --- measure every level against level 0 with one fixed reference sample set
     ppu = options.pixels_per_unit_at_unit_distance()
     levels = [LodLevel(0, idx, m0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
-    if len(raw) > 1:
+    if len(raw) > 1 and not options.measure:
+        nan = math.nan
+        for k, (out, err, sloppy) in enumerate(raw[1:], start=1):
+            levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy))
+    elif len(raw) > 1:
         ref = prepare_reference(local, idx, samples=options.error_samples, seed=options.error_seed)
         errors = measure_levels(ref, [r[0] for r in raw[1:]])
         scale = diag if diag > 0 and math.isfinite(diag) else 0.0

@@ -166,8 +166,8 @@ def test_uv_seams_stay_closed_duck(corpus):
     chain = build_lod_chain(v, f, uv=uv, normals=n, options=FAST)
     assert len(chain.levels) == 5
     _assert_error_non_decreasing(chain)
-    for lvl in chain.levels[1:]:
-        if lvl.sloppy:  # the sloppy fallback clusters by position: no seam guarantee
+    for k, lvl in enumerate(chain.levels[1:], start=1):
+        if any(x.sloppy for x in chain.levels[: k + 1]):  # sloppy clusters: no seam guarantee
             continue
         b = _border_edges_by_position(v, lvl.indices)
         # no new holes: every border edge by position runs between original border vertices
@@ -275,6 +275,8 @@ def test_corpus_chains(corpus):
         _check_chain(chain, len(v), len(f))
         _assert_error_non_decreasing(chain)
         b0 = set(_border_edges_by_position(v, f).ravel().tolist())
-        for lvl in chain.levels[1:]:
-            if not lvl.sloppy:
+        for k, lvl in enumerate(chain.levels[1:], start=1):
+            # a level made by the sloppy fallback, and every level simplified from it, may
+            # have cracks (clustering ignores seams): only sloppy-free descent is checked
+            if not any(x.sloppy for x in chain.levels[: k + 1]):
                 assert set(_border_edges_by_position(v, lvl.indices).ravel().tolist()) <= b0, path
