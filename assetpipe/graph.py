@@ -90,6 +90,12 @@ def explain(prev: dict | None, now: dict, hit_missing: bool = True) -> str:
     return "not in the cache (evicted, corrupt, or built elsewhere)"
 
 
+def _with_deps(kin: dict, record: dict) -> dict:
+    """Import key inputs plus the files the import discovered it read (for explanations)."""
+    deps = {d["path"]: d["digest"] for d in record["meta"].get("deps", [])}
+    return {**kin, "inputs": {**kin["inputs"], **deps}}
+
+
 class Executor:
     """Runs task calls inline (jobs == 1) or on a process pool; results in call order."""
 
@@ -180,7 +186,7 @@ class Graph:
         for key, owner_list in owners.items():
             for a, label, kin in owner_list:
                 ran = key in to_run
-                prev = self.previous.get(str(a.source), {}).get(label)
+                prev = self.previous.get(str(a.source.resolve()), {}).get(label)
                 a.runs.append(StepRun(label, ran, explain(prev, kin) if ran else None))
                 a.records[label] = results.get(key)
         return results
@@ -213,7 +219,7 @@ class Graph:
             if rec is not None and not self._deps_match(a, rec):
                 rec = None
             if rec is not None:
-                a.key_inputs["import"] = kin
+                a.key_inputs["import"] = _with_deps(kin, rec)
                 a.records["import"] = rec
                 a.runs.append(StepRun("import", False))
                 continue
@@ -243,9 +249,11 @@ class Graph:
         keys = [digest_json(kin) for _, _, kin, _ in jobs]
         outs = self.executor.map([call for _, _, _, call in jobs])
         for key, (assets, label, kin, _), (status, value) in zip(keys, jobs, outs):
+            if status == "ok":
+                kin = _with_deps(kin, value)
             for a in assets:
                 a.key_inputs[label] = kin
-                prev = self.previous.get(str(a.source), {}).get(label)
+                prev = self.previous.get(str(a.source.resolve()), {}).get(label)
                 a.runs.append(StepRun(label, True, explain(prev, kin)))
                 if status == "ok":
                     a.records[label] = value
@@ -263,9 +271,10 @@ class Graph:
         jobs = []
         for a in assets:
             imp = a.records["import"]
-            blob = imp["blobs"]["import"]
-            kin = self._key_inputs("mesh", {"import": blob}, self.mesh_opts)
-            jobs.append(([a], "mesh", kin, (steps.task_mesh, str(self.store.root), blob, self.mesh_opts)))
+            blob = imp["blobs"]["geometry"]
+            uvs = steps.uv_sets(imp["meta"]["materials"], imp["meta"]["meshMaterials"])
+            kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs)}, self.mesh_opts)
+            jobs.append(([a], "mesh", kin, (steps.task_mesh, str(self.store.root), blob, uvs, self.mesh_opts)))
             images = imp["meta"]["images"]
             base = a.source.parent
             for mi, mat in enumerate(imp["meta"]["materials"]):

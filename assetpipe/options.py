@@ -9,8 +9,8 @@ import dataclasses
 from dataclasses import dataclass
 
 from pipelines.lod import DEFAULT_LOD_OPTIONS, LodOptions
-from pipelines.mesh_process import DEFAULT_MESH_OPTIONS, MeshOptions
-from pipelines.texture_mips import DEFAULT_TEXTURE_OPTIONS, TextureOptions
+from pipelines.mesh_options import DEFAULT_MESH_OPTIONS, MeshOptions
+from pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
 
 
 @dataclass(frozen=True)

@@ -107,15 +107,15 @@ def task_import(store_root: str, source: str) -> dict:
     image_paths = {(base / im["path"]).resolve() for im in images if im["path"] is not None}
     deps = [{"path": _relative(d, base), "digest": digest_file(d)}
             for d in model.dependencies if Path(d).resolve() not in image_paths]
-    meta = {"materials": materials, "meshes": meshes, "images": images, "warnings": list(model.warnings)}
-    blobs["import"] = store.put_blob(pack(meta, arrays))
+    # geometry only: a material or texture edit leaves this blob, and the steps keyed on it, alone
+    blobs["geometry"] = store.put_blob(pack({"meshes": meshes}, arrays))
     return {"blobs": blobs, "meta": {"deps": deps, "images": images, "materials": materials,
                                      "meshMaterials": [m.material for m in model.meshes],
                                      "warnings": list(model.warnings)}}
 
 
-def load_import(store: Store, digest: str):
-    """(meta, list of MeshData) from an import blob."""
+def load_geometry(store: Store, digest: str):
+    """(meta, list of MeshData) from an import step's geometry blob."""
     from pipelines.model import MeshData
 
     data = store.get_blob(digest)
@@ -133,18 +133,24 @@ def load_import(store: Store, digest: str):
 
 # -- mesh processing ------------------------------------------------------------------------
 
-def task_mesh(store_root: str, import_digest: str, mesh_options: dict) -> dict:
+def uv_sets(materials: list[dict], mesh_materials: list[int]) -> list[int]:
+    """Per mesh, the UV set its material's base colour texture samples (0 without one)."""
+    out = []
+    for m in mesh_materials:
+        mat = materials[m] if 0 <= m < len(materials) else None
+        out.append(int(mat["textures"].get("baseColor", {}).get("texCoord", 0)) if mat else 0)
+    return out
+
+
+def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int], mesh_options: dict) -> dict:
     from pipelines.mesh_process import MeshOptions, process_mesh
 
     store = Store(Path(store_root))
     opts = options_from_json(MeshOptions, mesh_options)
-    meta, meshes = load_import(store, import_digest)
-    mats = meta["materials"]
+    meta, meshes = load_geometry(store, geometry_digest)
     out_meta, arrays = [], {}
     for i, mesh in enumerate(meshes):
-        mat = mats[mesh.material] if 0 <= mesh.material < len(mats) else None
-        uv_set = mat["textures"].get("baseColor", {}).get("texCoord", 0) if mat else 0
-        pm = process_mesh(mesh, opts, uv_set=uv_set)
+        pm = process_mesh(mesh, opts, uv_set=uv_set_per_mesh[i])
         arrays[f"{i}.vertices"] = pm.vertices
         arrays[f"{i}.indices"] = pm.indices
         out_meta.append({"name": pm.name, "material": pm.material, "degenerate": pm.degenerate_dropped,

@@ -84,7 +84,7 @@ class Store:
     def put_blob(self, data: bytes) -> str:
         digest = digest_bytes(data)
         path = self._path("objects", digest)
-        if not path.exists():
+        if self.get_blob(digest) is None:  # absent, or present but corrupt (dropped): write it
             self._write(path, data)
         return digest
 
@@ -128,7 +128,7 @@ class Store:
             self._drop(path, "record is corrupt")
             return None
         for d in record.get("blobs", {}).values():
-            if not self.has_blob(d):
-                self._drop(path, f"blob {d} is missing")
+            if self.get_blob(d) is None:  # absent, or corrupt (then dropped too)
+                self._drop(path, f"blob {d} is missing or corrupt")
                 return None
         return record

@@ -250,7 +250,8 @@ def ktx_parse(tmp_path_factory):
     node = shutil.which("node")
     pkg = _ktx_parse_dir()
     if node is None or pkg is None:
-        pytest.skip("needs node and the npm package ktx-parse: npm install --prefix .venv/node ktx-parse@2.0.0")
+        pytest.fail("needs node and the npm package ktx-parse (scripts/setup.sh installs them: "
+                    "npm install --prefix .venv/node ktx-parse@2.0.0)")
     script = tmp_path_factory.mktemp("ktxparse") / "check.mjs"
     module = json.dumps((pkg / "dist" / "index.mjs").as_uri())
     script.write_text(_NODE_SCRIPT % {"module": module})
