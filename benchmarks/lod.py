@@ -41,7 +41,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from pipelines import simplify as simp  # noqa: E402
-from pipelines.lod import DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain  # noqa: E402
+from pipelines.lod import (  # noqa: E402
+    DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain, weld_for_simplification)
 from pipelines.surface_error import measure_against, measure_levels, prepare_reference  # noqa: E402
 
 CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", REPO.parent / "shared" / "corpus")) / "models"
@@ -200,7 +201,7 @@ def main() -> int:
         lo, hi = pos[used].min(0), pos[used].max(0)
         diag = float(np.linalg.norm(hi - lo))
         pos32 = ((pos - (lo + hi) / 2) / diag).astype(np.float32)
-        welded = simp.weld_identical(tri, pos, uv)
+        welded = weld_for_simplification(tri, pos, uv, normals)
         ref = prepare_reference(pos, tri, samples=args.samples)
 
         def emit(kind, ratio, out_tri, seconds, err):

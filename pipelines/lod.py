@@ -71,7 +71,9 @@ class LodOptions:
       normal (hard-edge splits), so the simplifier does not treat hard edges as seams it must
       keep. Levels 1+ may then use, at a hard-edge corner, the normal of the other side (a
       softer edge in coarse levels); geometry is much better (Duck at 1/16: measured
-      Hausdorff 28.5% of the diagonal without, 4.7% with). UV seams are never welded.
+      Hausdorff 28.5% of the diagonal without, 4.7% with). UV seams are never welded, and
+      hard edges are not welded when that would add non-manifold edges (coincident sheets
+      in CAD models, which then block the simplifier).
     resolution_px, fov_y_deg: the reference view for ``switch_distance`` (vertical pixels
       and vertical field of view).
     error_samples, error_seed: area-weighted samples per side for the error measurement.
@@ -175,6 +177,41 @@ def _normalised(positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray,
     return (pos - centre) / scale, centre, diag
 
 
+def weld_for_simplification(
+    indices: np.ndarray, positions: np.ndarray, uv: np.ndarray | None = None,
+    normals: np.ndarray | None = None, other_attributes: Sequence[np.ndarray] = (),
+    weld_normal_seams: bool = True,
+) -> np.ndarray:
+    """The index buffer levels 1+ are simplified from (see ``LodOptions.weld_normal_seams``).
+
+    Vertices identical in position, UV and ``other_attributes`` (and normal, unless hard
+    edges are welded) are merged to the first of them. Hard edges are welded only when that
+    adds no non-manifold edge. Shapes: indices (M, 3), positions (N, 3), uv (N, 2),
+    normals (N, 3). Returns (M, 3) uint32 over the same N vertices.
+    """
+    welded = simp.weld_identical(indices, positions, uv, normals, *other_attributes)
+    if weld_normal_seams and normals is not None:
+        across = simp.weld_identical(indices, positions, uv, *other_attributes)
+        # Welding hard edges must not glue coincident sheets (CAD models often have them)
+        # into non-manifold edges, which the simplifier cannot collapse.
+        if _non_manifold_edges(across) <= _non_manifold_edges(welded):
+            welded = across
+    return welded
+
+
+def _non_manifold_edges(tri: np.ndarray) -> int:
+    """Number of distinct undirected edges used by more than two triangles. tri: (M, 3)."""
+    if tri.size == 0:
+        return 0
+    t = tri.astype(np.int64)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    e.sort(axis=1)
+    key = np.sort(e[:, 0] * (int(t.max()) + 1) + e[:, 1])
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    counts = np.diff(np.r_[starts, key.size])
+    return int(np.count_nonzero(counts > 2))
+
+
 def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOptions,
                 n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
     cols, weights = [], []
@@ -250,8 +287,8 @@ def build_lod_chain(
     # --- simplify: each level from the previous one. Identical duplicate vertices are welded
     # first (levels 1+ then use the first of each set of identical vertices): duplicates would
     # act as seams and block collapses.
-    welded = simp.weld_identical(
-        idx, pos, uv, None if options.weld_normal_seams else normals, *other_attributes)
+    welded = weld_for_simplification(idx, pos, uv, normals, other_attributes,
+                                     options.weld_normal_seams)
     raw: list[tuple[np.ndarray, float, bool]] = [(welded, 0.0, False)]
     steps = options.target_errors if options.target_errors is not None else options.ratios
     cumulative = 0.0
