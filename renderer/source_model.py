@@ -118,3 +118,56 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
                        indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)
+
+
+def _gltf_json(path: Path) -> dict[str, Any] | None:
+    """The JSON of a .gltf or .glb file (None for other formats or on errors)."""
+    import json  # noqa: PLC0415
+    import struct  # noqa: PLC0415
+
+    try:
+        if path.suffix.lower() == ".gltf":
+            return json.loads(path.read_text(encoding="utf-8"))
+        if path.suffix.lower() == ".glb":
+            with path.open("rb") as f:
+                head = f.read(20)
+                length = struct.unpack_from("<I", head, 12)[0]
+                return json.loads(f.read(length))
+    except (OSError, ValueError, struct.error):
+        return None
+    return None
+
+
+def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple[bool, bool, list[str]]:
+    """(compare geometry?, compare colours?, notes): where trimesh's reading is known to differ.
+
+    * glTF sparse accessors: trimesh ignores them, so its geometry is not a reference.
+    * KHR_texture_transform: trimesh ignores it; colours are not compared.
+    * OBJ without ``mtllib``: trimesh invents a grey material where the build uses white.
+    * The build has textures but trimesh loaded none (unresolvable paths, e.g. backslashes).
+    """
+    notes: list[str] = []
+    geometry, colour = True, True
+    doc = _gltf_json(path)
+    if doc is not None:
+        if any(isinstance(a, dict) and "sparse" in a for a in doc.get("accessors", [])):
+            geometry = False
+            notes.append("the source uses sparse accessors, which trimesh ignores: no source comparison")
+        used = set(doc.get("extensionsUsed", []))
+        if "KHR_texture_transform" in used:
+            colour = False
+            notes.append("the source uses KHR_texture_transform, which trimesh ignores: colours not compared")
+    elif path.suffix.lower() == ".obj":
+        try:
+            with path.open("rb") as f:
+                has_mtl = b"mtllib" in f.read(1 << 22)
+        except OSError:
+            has_mtl = False
+        if not has_mtl:
+            colour = False
+            notes.append("the OBJ has no mtllib (trimesh's default material is grey): colours not compared")
+    if colour and any(m.texture is not None for m in built.materials) and not any(
+            m.texture is not None for m in source.materials):
+        colour = False
+        notes.append("trimesh loaded none of the source's textures: colours not compared")
+    return geometry, colour, notes

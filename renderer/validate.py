@@ -164,8 +164,6 @@ def _jsonable(x: Any) -> Any:
 # ------------------------------------------------------------------------------ textures
 def check_textures(model_json: Path, options: ValidateOptions) -> CheckResult:
     """Check (e): every material texture at every mip level (CPU only, no rendering)."""
-    from PIL import Image  # noqa: PLC0415
-
     t0 = time.perf_counter()
     root = Path(model_json).parent
     msgs: list[str] = []
@@ -176,6 +174,7 @@ def check_textures(model_json: Path, options: ValidateOptions) -> CheckResult:
     except (OSError, ValueError) as exc:
         return CheckResult("textures", "fail", messages=[f"cannot read the material files: {exc}"])
     count = 0
+    seen: dict[str, tuple[dict[str, Any], list[str]]] = {}
     for mat in side.get("materials", []):
         mid = mat.get("id")
         for role, tex in (mat.get("textures") or {}).items():
@@ -190,75 +189,95 @@ def check_textures(model_json: Path, options: ValidateOptions) -> CheckResult:
             if not ktx_rel:
                 msgs.append(f"{key}: no KTX2 (mip chain missing)")
                 continue
-            try:
-                img = read_ktx2((root / ktx_rel).read_bytes())
-            except OSError as exc:
-                msgs.append(f"{key}: KTX2 {ktx_rel} missing ({exc.strerror})")
+            if ktx_rel in seen:  # a texture shared by several materials is checked once
+                fig.update(seen[ktx_rel][0])
+                msgs += [f"{key}: {m.split(': ', 1)[1]}" for m in seen[ktx_rel][1]]
                 continue
-            except Exception as exc:  # noqa: BLE001
-                msgs.append(f"{key}: KTX2 {ktx_rel} unreadable: {exc}")
-                continue
-            w, h, levels = int(img.width), int(img.height), list(img.levels)
-            fmt = int(img.vk_format)
-            full = int(math.floor(math.log2(max(w, h, 1)))) + 1
-            fig.update(width=w, height=h, levels=len(levels), fullChain=full, vkFormat=fmt)
-            if fmt != int(tex.get("vkFormat", fmt)):
-                msgs.append(f"{key}: vkFormat {fmt} but the sidecar says {tex.get('vkFormat')}")
-            expect_fmt = 43 if role in SRGB_ROLES else 37
-            if fmt in (37, 43) and fmt != expect_fmt:
-                msgs.append(f"{key}: vkFormat {fmt} for a {'colour' if role in SRGB_ROLES else 'data'} role "
-                            f"(expected {expect_fmt})")
-            if (w, h) != (int(tex.get("width", w)), int(tex.get("height", h))):
-                msgs.append(f"{key}: {w}x{h} but the sidecar says {tex.get('width')}x{tex.get('height')}")
-            if len(levels) != int(tex.get("levels", len(levels))):
-                msgs.append(f"{key}: {len(levels)} levels but the sidecar says {tex.get('levels')}")
-            if len(levels) < full:
-                msgs.append(f"{key}: {len(levels)} of {full} mip levels (missing levels)")
-            means = []
-            for i, lv in enumerate(levels):
-                arr = np.asarray(lv)
-                expect = (max(h >> i, 1), max(w >> i, 1))
-                if arr.shape[:2] != expect:
-                    msgs.append(f"{key}: level {i} is {arr.shape[1]}x{arr.shape[0]}, expected {expect[1]}x{expect[0]}")
-                    continue
-                if arr.dtype.kind == "f":
-                    if not np.isfinite(arr).all():
-                        msgs.append(f"{key}: level {i} holds NaN/Inf")
-                        continue
-                    norm = arr.astype(np.float64)
-                else:
-                    norm = arr.astype(np.float64) / float(np.iinfo(arr.dtype).max)
-                means.append(norm.reshape(-1, norm.shape[-1]).mean(axis=0))
-                if not norm[..., :3].any() and i > 0 and np.asarray(levels[0])[..., :3].any():
-                    msgs.append(f"{key}: level {i} is all black")
-            if means:
-                drift = [float(np.abs(m[:3] - means[0][:3]).max()) for m in means]
-                fig["maxMeanDrift"] = round(max(drift), 4)
-                bad = [i for i, d in enumerate(drift) if d > options.texture_mean_tolerance]
-                if bad:
-                    msgs.append(f"{key}: levels {bad} drift from level 0's mean colour by up to {max(drift):.3f} "
-                                f"(> {options.texture_mean_tolerance})")
-            png_rel = tex.get("path")
-            if png_rel and levels:
-                try:
-                    with Image.open(root / png_rel) as im:
-                        ref = np.asarray(im.convert("RGBA"), np.float64) / 255.0
-                except Exception as exc:  # noqa: BLE001
-                    msgs.append(f"{key}: level-0 image {png_rel} unreadable: {exc}")
-                    continue
-                lv0 = np.asarray(levels[0])
-                lv0f = lv0.astype(np.float64) / (255.0 if lv0.dtype == np.uint8 else 1.0)
-                if ref.shape != lv0f.shape:
-                    msgs.append(f"{key}: {png_rel} is {ref.shape[1]}x{ref.shape[0]}, the KTX2 level 0 "
-                                f"{lv0f.shape[1]}x{lv0f.shape[0]} (swapped texture?)")
-                else:
-                    d = float(np.abs(ref - lv0f).mean())
-                    fig["level0VsImage"] = round(d, 5)
-                    if d > options.texture_png_tolerance:
-                        msgs.append(f"{key}: KTX2 level 0 differs from {png_rel} (mean {d:.4f}; swapped texture?)")
+            tex_msgs = _check_one_texture(root, key, role, tex, fig, options)
+            seen[ktx_rel] = (dict(fig), tex_msgs)
+            msgs += tex_msgs
     figures["textures"] = count
     return CheckResult("textures", "fail" if msgs else "pass", _jsonable(figures), msgs,
                        time.perf_counter() - t0)
+
+
+_SRGB_TO_LINEAR = np.where(np.arange(256) / 255.0 <= 0.04045, np.arange(256) / 255.0 / 12.92,
+                           ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], fig: dict[str, Any],
+                       options: ValidateOptions) -> list[str]:
+    """The checks of one KTX2 (see :func:`check_textures`); fills ``fig``, returns the problems."""
+    from PIL import Image  # noqa: PLC0415
+
+    msgs: list[str] = []
+    ktx_rel = tex["ktx2"]
+    try:
+        img = read_ktx2((root / ktx_rel).read_bytes())
+    except OSError as exc:
+        return [f"{key}: KTX2 {ktx_rel} missing ({exc.strerror})"]
+    except Exception as exc:  # noqa: BLE001
+        return [f"{key}: KTX2 {ktx_rel} unreadable: {exc}"]
+    w, h, levels = int(img.width), int(img.height), list(img.levels)
+    fmt = int(img.vk_format)
+    full = int(math.floor(math.log2(max(w, h, 1)))) + 1
+    fig.update(width=w, height=h, levels=len(levels), fullChain=full, vkFormat=fmt)
+    if fmt != int(tex.get("vkFormat", fmt)):
+        msgs.append(f"{key}: vkFormat {fmt} but the sidecar says {tex.get('vkFormat')}")
+    expect_fmt = 43 if role in SRGB_ROLES else 37
+    if fmt in (37, 43) and fmt != expect_fmt:
+        msgs.append(f"{key}: vkFormat {fmt} for a {'colour' if role in SRGB_ROLES else 'data'} role "
+                    f"(expected {expect_fmt})")
+    if (w, h) != (int(tex.get("width", w)), int(tex.get("height", h))):
+        msgs.append(f"{key}: {w}x{h} but the sidecar says {tex.get('width')}x{tex.get('height')}")
+    if len(levels) != int(tex.get("levels", len(levels))):
+        msgs.append(f"{key}: {len(levels)} levels but the sidecar says {tex.get('levels')}")
+    if len(levels) < full:
+        msgs.append(f"{key}: {len(levels)} of {full} mip levels (missing levels)")
+    means = []
+    lv0_rgb_any = bool(np.asarray(levels[0])[..., :3].any()) if levels else False
+    for i, lv in enumerate(levels):
+        arr = np.asarray(lv)
+        expect = (max(h >> i, 1), max(w >> i, 1))
+        if arr.shape[:2] != expect:
+            msgs.append(f"{key}: level {i} is {arr.shape[1]}x{arr.shape[0]}, expected {expect[1]}x{expect[0]}")
+            continue
+        if arr.dtype.kind == "f":
+            if not np.isfinite(arr).all():
+                msgs.append(f"{key}: level {i} holds NaN/Inf")
+                continue
+            rgb, alpha = arr[..., :3].astype(np.float32), arr[..., 3].astype(np.float32)
+        else:
+            rgb = _SRGB_TO_LINEAR[arr[..., :3]] if fmt == 43 else arr[..., :3].astype(np.float32) / 255.0
+            alpha = arr[..., 3].astype(np.float32) / 255.0
+        if i > 0 and lv0_rgb_any and not arr[..., :3].any():
+            msgs.append(f"{key}: level {i} is all black")
+        # premultiplied linear means: what a gamma-correct, alpha-aware box filter preserves
+        means.append((rgb * alpha[..., None]).reshape(-1, 3).mean(axis=0))
+    if means:
+        drift = [float(np.abs(m - means[0]).max()) for m in means]
+        fig["maxMeanDrift"] = round(max(drift), 4)
+        bad = [i for i, d in enumerate(drift) if d > options.texture_mean_tolerance]
+        if bad:
+            msgs.append(f"{key}: levels {bad} drift from level 0's mean colour by up to {max(drift):.3f} "
+                        f"(> {options.texture_mean_tolerance})")
+    png_rel = tex.get("path")
+    if png_rel and levels:
+        try:
+            with Image.open(root / png_rel) as im:
+                ref = np.asarray(im.convert("RGBA"))
+        except Exception as exc:  # noqa: BLE001
+            return msgs + [f"{key}: level-0 image {png_rel} unreadable: {exc}"]
+        lv0 = np.asarray(levels[0])
+        if ref.shape != lv0.shape:
+            msgs.append(f"{key}: {png_rel} is {ref.shape[1]}x{ref.shape[0]}, the KTX2 level 0 "
+                        f"{lv0.shape[1]}x{lv0.shape[0]} (swapped texture?)")
+        elif lv0.dtype == np.uint8:
+            d = float(np.abs(ref.astype(np.int16) - lv0.astype(np.int16)).mean()) / 255.0
+            fig["level0VsImage"] = round(d, 5)
+            if d > options.texture_png_tolerance:
+                msgs.append(f"{key}: KTX2 level 0 differs from {png_rel} (mean {d:.4f}; swapped texture?)")
+    return msgs
 
 
 # ------------------------------------------------------------------------------- sources
@@ -343,6 +362,11 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
         "meshes": len(model.meshes), "materials": len(model.materials), "vertices": int(len(model.positions)),
         "triangles": model.triangles(0), "lods": model.lod_count}, seconds=time.perf_counter() - t0))
 
+    if model.triangles(0) == 0:
+        for name in ("silhouette", "source", "lods"):
+            if name in selected:
+                result.checks.append(CheckResult(name, "skip", messages=["the model has no triangles to draw"]))
+        selected -= {"silhouette", "source", "lods"}
     gpu = None
     try:
         with _Timer(timings, "upload"):
@@ -429,6 +453,12 @@ def _check_source(model_json: Path, model: RenderModel, cams: list[Camera], sils
     except AssetpipeError as exc:
         return CheckResult("source", "skip", {"source": str(src)}, [f"source not importable by trimesh: {exc}"])
     notes += [f"source: {n}" for n in source.notes]
+    from .source_model import source_caveats  # noqa: PLC0415
+
+    geometry_ok, colour_ok, caveats = source_caveats(src, model, source)
+    notes += [f"source check: {c}" for c in caveats]
+    if not geometry_ok:
+        return CheckResult("source", "skip", {"source": str(src)}, caveats)
     gpu = None
     msgs: list[str] = []
     figs: dict[str, Any] = {"source": str(src), "views": []}
@@ -452,13 +482,16 @@ def _check_source(model_json: Path, model: RenderModel, cams: list[Camera], sils
                 if unexp > options.source_max_unexplained:
                     msgs.append(f"view {k}: {unexp:.2%} of the silhouette is more than 1 px from the source's "
                                 f"(> {options.source_max_unexplained:.2%})")
-                if color > options.source_color_tolerance:
+                if colour_ok and color > options.source_color_tolerance:
                     msgs.append(f"view {k}: shaded colours differ from the source by {color:.3f} "
                                 f"(> {options.source_color_tolerance}; wrong texture or material?)")
     finally:
         if gpu is not None:
             renderer.release(gpu)
-    return CheckResult("source", "fail" if msgs else "pass", figs, msgs, time.perf_counter() - t0)
+    if not colour_ok:
+        figs["colourCompared"] = False
+    return CheckResult("source", "fail" if msgs else "pass", figs, msgs + ([] if msgs else caveats),
+                       time.perf_counter() - t0)
 
 
 def _check_lods(model: RenderModel, gpu: Any, options: ValidateOptions, renderer: Any,

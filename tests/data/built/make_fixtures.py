@@ -29,7 +29,7 @@ KTX2_ID = b"\xabKTX 20\xbb\r\n\x1a\n"
 
 
 def texture_levels() -> list[np.ndarray]:
-    """An 8x8 texture (four coloured quadrants, a white dot) and its box-filtered mips."""
+    """An 8x8 texture (four coloured quadrants, a white dot) and its gamma-correct box-filtered mips."""
     lv0 = np.zeros((8, 8, 4), np.uint8)
     lv0[..., 3] = 255
     lv0[:4, :4, :3] = (220, 40, 40)
@@ -38,11 +38,23 @@ def texture_levels() -> list[np.ndarray]:
     lv0[4:, 4:, :3] = (240, 220, 40)
     lv0[1, 1, :3] = 255
     levels = [lv0]
-    while levels[-1].shape[0] > 1:
-        a = levels[-1].astype(np.float64)
-        h, w = a.shape[0] // 2, a.shape[1] // 2
-        levels.append(np.round(a.reshape(h, 2, w, 2, 4).mean(axis=(1, 3))).astype(np.uint8))
+    lin = _to_linear(lv0[..., :3].astype(np.float64) / 255.0)
+    alpha = lv0[..., 3].astype(np.float64) / 255.0
+    while levels[-1].shape[0] > 1:  # gamma-correct box filter (average in linear light)
+        h, w = lin.shape[0] // 2, lin.shape[1] // 2
+        lin = lin.reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
+        alpha = alpha.reshape(h, 2, w, 2).mean(axis=(1, 3))
+        rgb = np.round(_to_srgb(lin) * 255.0)
+        levels.append(np.concatenate([rgb, np.round(alpha * 255.0)[..., None]], axis=-1).astype(np.uint8))
     return levels
+
+
+def _to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _to_srgb(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * np.power(c, 1 / 2.4) - 0.055)
 
 
 def ktx2_bytes(levels: list[np.ndarray], vk_format: int = 43) -> bytes:
