@@ -71,7 +71,7 @@ def build_corpus_model(name: str, out: Path) -> Path | None:
         return None
     exe = Path(sys.executable).with_name("assetpipe")
     cmd = [str(exe)] if exe.is_file() else [sys.executable, "-m", "assetpipe.cli"]
-    proc = subprocess.run(cmd + ["build", str(src), "-o", str(out)], capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(cmd + ["build", str(src), "-o", str(out), "--cache", str(out / ".cache"), "-q"], capture_output=True, text=True, timeout=600)
     found = sorted(p for p in out.glob("*.json") if not p.name.endswith((".asset.json", "-mat.json")))
     return found[0] if proc.returncode == 0 and found else None
 
