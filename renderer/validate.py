@@ -550,10 +550,8 @@ def validate_model(model_json: Path | str, options: ValidateOptions | None = Non
     renderer = shared_renderer(options.width, options.height, validation=options.validation_layer,
                                shader_cache=Path(options.shader_cache) if options.shader_cache else None)
     setup = time.perf_counter() - t0
-    before = dict(renderer.timings)
     result = run_checks(Path(model_json), options, renderer)
     result.timings["setup"] = setup
-    del before
     return result
 
 

@@ -71,3 +71,35 @@ def test_back_faces_are_culled_unless_double_sided() -> None:
         r.release(gpu)
     assert (img[..., 3] > 0).sum() == 0       # inside a closed cube all faces are back faces
     assert (sil[..., 3] > 0).all()             # coverage mode draws every triangle
+
+
+def _run(code: str, **env: str) -> str:
+    import os
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, **env}, cwd=Path(__file__).resolve().parents[1])
+    return proc.stdout + proc.stderr
+
+
+def test_missing_lavapipe_icd_names_the_packages() -> None:
+    out = _run("from renderer._vk import load_vulkan\n"
+               "from assetpipe.errors import RenderError\n"
+               "try:\n    load_vulkan()\nexcept RenderError as e:\n    print('RenderError', e)\n",
+               ASSETPIPE_VK_ICD="/nonexistent/lvp_icd.json")
+    assert "RenderError" in out and "mesa-vulkan-drivers libvulkan1" in out
+
+
+def test_missing_libvulkan_names_the_packages() -> None:
+    """``import vulkan`` raising OSError (libvulkan.so.1 absent) becomes a RenderError."""
+    out = _run("import builtins\n"
+               "real = builtins.__import__\n"
+               "def fake(name, *a, **k):\n"
+               "    if name == 'vulkan':\n        raise OSError('libvulkan.so.1: cannot open shared object file')\n"
+               "    return real(name, *a, **k)\n"
+               "builtins.__import__ = fake\n"
+               "from renderer.vk_context import VkContext\n"
+               "from assetpipe.errors import RenderError\n"
+               "try:\n    VkContext()\nexcept RenderError as e:\n    print('RenderError', e)\n")
+    assert "RenderError" in out and "libvulkan.so.1" in out and "vulkan-validationlayers glslang-tools" in out
