@@ -35,10 +35,10 @@ def build_corpus(out: Path) -> tuple[list[Path], list[str]]:
     """Build every corpus model into ``out``; (built ID.json files, failures)."""
     exe = Path(sys.executable).with_name("assetpipe")
     built, failed = [], []
-    for src in sorted(p for p in CORPUS.iterdir() if p.is_dir()):
+    for src in sorted(p for p in CORPUS.iterdir() if p.is_dir() and not p.name.startswith(".")):
         dest = out / src.name
-        proc = subprocess.run([str(exe), "build", str(src), "-o", str(dest)], capture_output=True, text=True,
-                              timeout=900)
+        proc = subprocess.run([str(exe), "build", str(src), "-o", str(dest), "--cache", str(out / ".cache"), "-q"],
+                              capture_output=True, text=True, timeout=900)
         models = find_built_models([str(dest)]) if dest.is_dir() else []
         if proc.returncode != 0 or not models:
             last = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
