@@ -110,5 +110,14 @@ def inspect(model_json: Path) -> None:
     click.echo("consistent: yes")
 
 
+def _register_renderer_commands() -> None:
+    from renderer.cli_commands import preview, validate  # light: vulkan is imported when they run
+
+    main.add_command(validate)
+    main.add_command(preview)
+
+
+_register_renderer_commands()
+
 if __name__ == "__main__":  # pragma: no cover
     main()
