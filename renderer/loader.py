@@ -41,11 +41,9 @@ _FORMATS: dict[str, tuple[np.dtype, int, float | None]] = {
 
 
 def read_ktx2(data: bytes) -> Any:
-    """``assetpipe.ktx2.read_ktx2`` when it exists, else the renderer's minimal fallback."""
-    try:
-        from assetpipe.ktx2 import read_ktx2 as project_reader  # noqa: PLC0415
-    except ImportError:
-        from ._ktx2_fallback import read_ktx2 as project_reader  # noqa: PLC0415
+    """The project's KTX2 reader (``assetpipe.ktx2.read_ktx2``): .vk_format, .width, .height, .levels."""
+    from assetpipe.ktx2 import read_ktx2 as project_reader  # noqa: PLC0415
+
     return project_reader(data)
 
 
