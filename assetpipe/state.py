@@ -127,3 +127,12 @@ class OutputState:
             except FileNotFoundError:
                 pass
         return removed
+
+
+def source_of(out_dir: Path, model_id: str) -> Path | None:
+    """The source file the build in ``out_dir`` made ``model_id`` from (None if unknown)."""
+    data = _read_json(Path(out_dir) / STATE_DIR / "state.json")
+    for source, entry in data.get("assets", {}).items():
+        if isinstance(entry, dict) and entry.get("id") == model_id:
+            return Path(source)
+    return None

@@ -4,7 +4,7 @@ Bump a step's version when its output changes for the same inputs and options: i
 that step's cache key, so every cached result of the old version is rebuilt.
 """
 
-IMPORT = 1
+IMPORT = 2  # 2: geometry-only blob
 MESH = 1
 LOD = 1
 TEXTURE = 1

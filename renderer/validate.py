@@ -282,13 +282,19 @@ def _check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], fig
 
 # ------------------------------------------------------------------------------- sources
 def find_source(model_json: Path, side: dict[str, Any], options: ValidateOptions) -> Path | None:
-    """The source file named in the sidecar: beside the build, under ``source_root``, or by search."""
+    """The source file of a built model: as the build recorded it (OUT/.assetpipe/state.json),
+    beside the build, or under ``source_root`` (searched)."""
     sources = side.get("sources") or []
     if not sources or not sources[0].get("path"):
         return None
     rel = Path(sources[0]["path"])
     digest = sources[0].get("digest")
     cands = [rel] if rel.is_absolute() else [Path(model_json).parent / rel]
+    from assetpipe.state import source_of  # noqa: PLC0415 - the build's own record of its sources
+
+    recorded = source_of(Path(model_json).parent, side.get("id", Path(model_json).stem))
+    if recorded is not None:
+        cands.insert(0, recorded)
     if options.source_root and not rel.is_absolute():
         root = Path(options.source_root)
         cands.append(root / rel)
