@@ -144,15 +144,13 @@ def _build_changed(todo, ids, why, out_dir, options, store, stat, state, opt_dig
     from assetpipe.graph import AssetState, Graph
 
     explain_prev = state.load_explain()
-    t0 = time.perf_counter()
     graph = Graph(store, stat, options, explain_prev, jobs=jobs)
     assets = [AssetState(source=s, id=ids[s]) for s in todo]
     graph.build(assets)
-    per_asset = (time.perf_counter() - t0) / max(len(assets), 1)
     explain_steps = dict(explain_prev)
     for a in assets:
         key = str(a.source.resolve())
-        r = AssetResult(source=str(a.source), id=a.id, status="failed", seconds=per_asset)
+        r = AssetResult(source=str(a.source), id=a.id, status="failed", seconds=a.seconds)
         r.steps = [{"step": run.step, "ran": run.ran, **({"reason": run.reason} if run.ran else {})}
                    for run in a.runs]
         if not a.failed:

@@ -10,7 +10,7 @@ import click
 from assetpipe import __version__
 from assetpipe.errors import AssetpipeError
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
-from pipelines.lod import SIMPLIFIERS
+from pipelines.lod_options import SIMPLIFIERS
 
 _D = DEFAULT_BUILD_OPTIONS
 

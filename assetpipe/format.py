@@ -8,6 +8,7 @@ key is documented in ``docs/FORMAT.md``. Output is deterministic: same input, sa
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,8 +54,11 @@ class OutputMaterial:
     textures: dict = field(default_factory=dict, hash=False)  # role -> sidecar dict
 
 
-def _num(x: float) -> float:
-    """A float rounded to 9 significant digits (float32 precision): stable, readable JSON."""
+def _num(x: float | None) -> float | None:
+    """A float rounded to 9 significant digits (float32 precision): stable, readable JSON.
+    Not-a-number (an error a simplifier does not estimate) becomes null."""
+    if x is None or not math.isfinite(float(x)):
+        return None
     return float(f"{float(x):.9g}")
 
 

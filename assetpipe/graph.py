@@ -60,6 +60,7 @@ class AssetState:
     inputs: dict = field(default_factory=dict)  # absolute path -> digest (everything read)
     texture_jobs: dict = field(default_factory=dict)  # (material, role) -> texture key
     outputs: dict = field(default_factory=dict)  # OUT-relative path -> blob digest
+    seconds: float = 0.0  # time of the steps run for this asset (a shared step counts for each)
 
     @property
     def failed(self) -> bool:
@@ -103,7 +104,7 @@ class Executor:
         self.jobs = max(1, int(jobs))
         self.pool = ProcessPoolExecutor(self.jobs) if self.jobs > 1 else None
 
-    def map(self, calls: list[tuple]) -> list[tuple[str, object]]:
+    def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
         if self.pool is None or len(calls) <= 1:
             return [steps.call_task(fn, *args) for fn, *args in calls]
         futures = [self.pool.submit(steps.call_task, fn, *args) for fn, *args in calls]
@@ -112,7 +113,7 @@ class Executor:
             try:
                 out.append(f.result())
             except BrokenProcessPool:
-                out.append(("internal", "a build worker process crashed (killed or a native library fault)"))
+                out.append(("internal", "a build worker process crashed (killed or a native library fault)", 0.0))
                 self._restart()
         return out
 
@@ -167,7 +168,9 @@ class Graph:
             else:
                 to_run[key] = call
         keys = list(to_run)
-        for key, (status, value) in zip(keys, self.executor.map([to_run[k] for k in keys])):
+        for key, (status, value, secs) in zip(keys, self.executor.map([to_run[k] for k in keys])):
+            for a, _, _ in owners[key]:
+                a.seconds += secs
             if status == "ok":
                 self.store.put_record(key, value)
                 results[key] = value
@@ -248,10 +251,11 @@ class Graph:
         results = {}
         keys = [digest_json(kin) for _, _, kin, _ in jobs]
         outs = self.executor.map([call for _, _, _, call in jobs])
-        for key, (assets, label, kin, _), (status, value) in zip(keys, jobs, outs):
+        for key, (assets, label, kin, _), (status, value, secs) in zip(keys, jobs, outs):
             if status == "ok":
                 kin = _with_deps(kin, value)
             for a in assets:
+                a.seconds += secs
                 a.key_inputs[label] = kin
                 prev = self.previous.get(str(a.source.resolve()), {}).get(label)
                 a.runs.append(StepRun(label, True, explain(prev, kin)))

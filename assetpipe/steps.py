@@ -12,6 +12,7 @@ Step versions live in :mod:`assetpipe.versions`.
 from __future__ import annotations
 
 import dataclasses
+import time
 import traceback
 from pathlib import Path
 
@@ -22,16 +23,18 @@ from assetpipe.errors import AssetError
 from cache.serialize import pack, unpack
 from cache.store import Store
 
-def call_task(fn, *args) -> tuple[str, object]:
-    """Run a task; ("ok", record) | ("asset", "path: problem") | ("internal", traceback)."""
+def call_task(fn, *args) -> tuple[str, object, float]:
+    """Run a task: (status, value, seconds) with status "ok" (value: the record), "asset"
+    (value: "path: problem") or "internal" (value: the traceback of a bug of ours)."""
+    t0 = time.perf_counter()
     try:
-        return "ok", fn(*args)
+        return "ok", fn(*args), time.perf_counter() - t0
     except AssetError as exc:
-        return "asset", str(exc)
+        return "asset", str(exc), time.perf_counter() - t0
     except MemoryError:
-        return "asset", "out of memory"
+        return "asset", "out of memory", time.perf_counter() - t0
     except Exception as exc:  # a bug of ours
-        return "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+        return "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", time.perf_counter() - t0
 
 
 def options_from_json(cls, data: dict | None):
@@ -186,7 +189,12 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
         else:
             uv = verts[:, cols["uv0"]] if "uv0" in cols and m.get("hasUv") else None
             normals = verts[:, cols["normal"]] if "normal" in cols else None
-            chain = build_lod_chain(verts[:, :3], idx, uv=uv, normals=normals, options=opts)
+            # every other written attribute, so welding for simplification never merges
+            # vertices that differ in something the simplifier does not weigh
+            others = tuple(verts[:, cols[a]] for a in layout if a not in ("position", "normal")
+                           and not (a == "uv0" and uv is not None))
+            chain = build_lod_chain(verts[:, :3], idx, uv=uv, normals=normals, other_attributes=others,
+                                    options=opts)
             order = reorder_for_lod_prefix([lv.indices for lv in chain.levels], verts.shape[0])
             out_arrays[f"{i}.vertices"] = verts[order.order]
             levels_meta = []
@@ -206,7 +214,7 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
     from assetpipe.errors import MissingFileError
     from assetpipe.hashing import digest_bytes
     from pipelines.model import ImageSource
-    from pipelines.texture_mips import TextureOptions
+    from pipelines.texture_options import TextureOptions
     from pipelines.texture_process import process_texture
 
     store = Store(Path(store_root))

@@ -17,12 +17,11 @@ from assetpipe.errors import InvalidTextureError
 from assetpipe.ktx2 import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, write_ktx2
 from pipelines.model import ImageSource
 from pipelines.texture_decode import decode_image, has_alpha_below_255
-from pipelines.texture_mips import DEFAULT_TEXTURE_OPTIONS, TextureOptions, build_mip_chain
+from pipelines.texture_mips import build_mip_chain
+from pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
 
-# Bump when the output of process_texture changes for the same input and options
-# (filtering, KTX2 layout, level-0 encoding): it belongs in the step's cache key, together
-# with the image digest, role, alpha mode, alpha cutoff and ``options.cache_key()``.
-TEXTURE_STEP_VERSION = 1
+# When the output of process_texture changes for the same input and options (filtering,
+# KTX2 layout, level-0 encoding), bump assetpipe/versions.py's TEXTURE: the step's cache key.
 
 _KEEP_AS_IS = {"image/png": ".png", "image/jpeg": ".jpg"}
 

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from pipelines.lod import (
-    DEFAULT_LOD_OPTIONS, LOD_STEP_VERSION, LodOptions, build_lod_chain, reorder_for_lod_prefix)
+    DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain, reorder_for_lod_prefix)
 
 FAST = LodOptions(error_samples=5000)
 
@@ -77,7 +77,6 @@ def _assert_error_non_decreasing(chain):
 def test_chain_counts_down_and_error_up():
     v, f = _bumpy_sphere()
     chain = build_lod_chain(v, f, options=FAST)
-    assert LOD_STEP_VERSION == 1
     assert len(chain.levels) == 5
     assert chain.levels[0].indices is not None
     np.testing.assert_array_equal(chain.levels[0].indices, f)
