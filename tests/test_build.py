@@ -140,3 +140,59 @@ def test_inspect_reports_a_consistent_model_and_catches_corruption(corpus, tmp_p
     idx.tofile(out / "Duck.idx")
     r = CliRunner().invoke(main, ["inspect", str(out / "Duck.json")])
     assert r.exit_code == 1 and "index 1000000" in r.output
+
+
+@pytest.mark.parametrize("rel", ["Duck/glTF/Duck.gltf", "CesiumMilkTruck/glTF/CesiumMilkTruck.gltf",
+                                 "2CylinderEngine/glTF/2CylinderEngine.gltf", "fuze/fuze.obj"])
+def test_built_positions_match_trimeshs_flattened_scene(corpus, tmp_path, rel):
+    """Independent check of node flattening and triangulation on the *built* files."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    src = corpus / "models" / rel
+    out = tmp_path / "out"
+    assert run_build(str(src), "-o", str(out), "--no-lod", "--json", str(tmp_path / "r.json")).exit_code == 0
+    entry = json.loads((tmp_path / "r.json").read_text())["assets"][0]
+    model = load_seed_model(out / f"{entry['id']}.json")
+    ours = np.vstack([m.positions for m in model.meshes]).astype(np.float64)
+    ours_tris = sum(m.indices.shape[0] for m in model.meshes)
+
+    scene = trimesh.load(src, force="scene", process=False)
+    geoms = scene.dump(concatenate=False) if hasattr(scene, "dump") else [scene]
+    ref = np.vstack([np.asarray(g.vertices, dtype=np.float64) for g in geoms])
+    ref_tris = sum(len(g.faces) for g in geoms)
+
+    diag = float(np.linalg.norm(ref.max(axis=0) - ref.min(axis=0)))
+    tol = 1e-6 * diag + 1e-6
+    d_ours, _ = cKDTree(ref).query(ours)
+    d_ref, _ = cKDTree(ours).query(ref)
+    assert d_ours.max() <= tol and d_ref.max() <= tol, (d_ours.max(), d_ref.max(), tol)
+    # every source triangle is built, or counted as a dropped degenerate one
+    assert ours_tris + entry["stats"]["degenerateTriangles"] == ref_tris
+
+
+def test_lod_chain_in_the_built_files(corpus, tmp_path):
+    out = tmp_path / "out"
+    assert run_build(str(corpus / "models/Duck/glTF/Duck.gltf"), "-o", str(out)).exit_code == 0
+    side = json.loads((out / "Duck.asset.json").read_text())
+    idx = np.fromfile(out / "Duck.idx", dtype="<u4")
+    vtx = np.fromfile(out / "Duck.vtx", dtype="<f4").reshape(-1, 5)
+    mesh = side["meshes"][0]
+    lods = mesh["lods"]
+    assert len(lods) == 5  # ratios 1, 1/2, 1/4, 1/8, 1/16 on 4212 triangles
+    tris = [l["triangles"] for l in lods]
+    assert all(a > b for a, b in zip(tris, tris[1:]))
+    errs = [l["error"]["hausdorffRel"] for l in lods]
+    assert errs[0] == 0 and all(a <= b for a, b in zip(errs, errs[1:]))
+    sw = [l["switchDistance"] for l in lods]
+    assert sw[0] == 0 and all(a <= b for a, b in zip(sw, sw[1:]))
+    counts = [l["vertexCount"] for l in lods]
+    assert counts[0] == mesh["vertexCount"] and all(a >= b for a, b in zip(counts, counts[1:]))
+    for l in lods:
+        part = idx[l["idxOffset"] // 4:(l["idxOffset"] + l["idxSize"]) // 4]
+        assert part.size == 3 * l["triangles"]
+        assert int(part.max()) < l["vertexCount"]  # coarse levels use a prefix of the vertex range
+    # the coarse levels' vertices are LOD0 vertices: no new positions
+    assert np.isfinite(vtx).all()
+    assert abs(lods[1]["error"]["hausdorff"] - lods[1]["error"]["hausdorffRel"] * np.linalg.norm(
+        np.array(mesh["bounds"]["max"]) - mesh["bounds"]["min"])) < 1e-3 * lods[1]["error"]["hausdorff"] + 1e-9
