@@ -57,6 +57,24 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
     provided = {"position": pos, "uv0": uv_a, "uv1": uv_b, "normal": mesh.normals,
                 "tangent": mesh.tangents, "color": mesh.colors}
 
+    # 2. sanitise what the layout keeps, and what generated tangents are derived from, first
+    needed = set(options.layout)
+    if "tangent" in needed and mesh.tangents is None:
+        needed |= {"uv0", "normal"}
+    for name in sorted(needed - {"position"}, key=list(provided).index):
+        arr = provided[name]
+        if arr is None:
+            continue
+        k = ATTRIBUTE_COMPONENTS[name]
+        arr = np.asarray(arr, dtype=np.float64)
+        arr = arr.reshape(n, -1)[:, :k] if n else arr.reshape(0, k)
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            warnings.append(f"{mesh.name}: {int(bad.any(axis=1).sum())} non-finite {name} values replaced by 0")
+            arr = np.where(bad, 0.0, arr)
+        provided[name] = arr
+    uv_a = provided["uv0"]
+
     # 4 (first half). degenerate by repeated index: cheap, before anything else
     degenerate = 0
     if options.drop_degenerate and tris.shape[0]:
@@ -79,13 +97,7 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
                 warnings.append(f"{mesh.name}: tangents requested without UVs; an arbitrary tangent frame was generated")
         elif arr is None:
             arr = np.ones((n, k)) if name == "color" else np.zeros((n, k))
-        arr = np.asarray(arr, dtype=np.float64).reshape(n, -1)[:, :k]
-        if name != "position":
-            bad = ~np.isfinite(arr)
-            if bad.any():
-                warnings.append(f"{mesh.name}: {int(bad.any(axis=1).sum())} non-finite {name} values replaced by 0")
-                arr = np.where(bad, 0.0, arr)
-        columns.append(arr)
+        columns.append(np.asarray(arr, dtype=np.float64).reshape(n, k))
     verts = np.hstack(columns) if columns else pos.copy()
 
     welded = 0
