@@ -90,7 +90,15 @@ def _tree_rss_kb(pid: int) -> int:
 TIME = "/usr/bin/time"
 
 
-def run(cmd: list[str], *, rss: bool = False, timeout: float | None = None, cwd=None) -> dict:
+#: Environment of every subprocess: bytecode caching on, into a private prefix (set in main).
+#: An installed tool runs from .pyc files; an inherited PYTHONDONTWRITEBYTECODE=1 would make
+#: every CLI start-up compile the project's modules from source (tens of ms) while a bare
+#: ``python -c pass`` compiles nothing, which would skew every start-up ratio.
+ENV = dict(os.environ)
+INHERITED_NO_PYC = os.environ.get("PYTHONDONTWRITEBYTECODE", "") != ""
+
+
+def run(cmd: list[str], *, rss: bool = False, timeout: float | None = None, cwd=None, env=None) -> dict:
     """Run ``cmd``: wall seconds, exit code, output; with ``rss``, peak RSS in KB of its largest
     single process (GNU time's %M: the process and its reaped children, e.g. pool workers) and
     the sampled peak of the whole process tree's total RSS (every 50 ms). Untimed runs only
@@ -103,7 +111,7 @@ def run(cmd: list[str], *, rss: bool = False, timeout: float | None = None, cwd=
         os.close(fd)
         cmd = [TIME, "-f", "%M", "-o", rss_file, *cmd]
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=cwd)
+    proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=cwd, env=env or ENV)
     peak_tree = [0]
     stop = threading.Event()
 
@@ -477,6 +485,10 @@ def main() -> int:
         table.append((figure, measured, goal, "-" if ok is None else "PASS" if ok else "FAIL"))
 
     tmp = Path(tempfile.mkdtemp(prefix="assetpipe-bench-incr-"))
+    ENV.pop("PYTHONDONTWRITEBYTECODE", None)
+    ENV["PYTHONPYCACHEPREFIX"] = str(tmp / "pycache")
+    print(f"subprocesses: bytecode cache in {tmp / 'pycache'} (warm-up runs fill it first)"
+          + ("; PYTHONDONTWRITEBYTECODE=1 was inherited and is dropped for them" if INHERITED_NO_PYC else ""))
     print(f"temp dir: {tmp}{' (kept)' if args.keep else ''}; corpus: {CORPUS}; repeats: {repeats}")
     try:
         pass_cmd = [PY, "-c", "pass"]
@@ -511,14 +523,25 @@ def main() -> int:
             print(f"\n[2] no-op rebuild of the corpus vs python -c pass, {repeats} each, interleaved ...", flush=True)
             cmd = build_cmd(CORPUS, corpus_out, corpus_cache, *lod_args)
             first = run(cmd)
+            run(pass_cmd)  # warm-up: fills the bytecode cache for both
             check_ok(first, "no-op rebuild")
             counts = summary_counts(first["stdout"])
             print(f"    first no-op: {first['stdout'].strip()}")
-            res = interleave({"noop": lambda: run(cmd), "pass": lambda: run(pass_cmd)}, repeats)
+            series = {"noop": lambda: run(cmd), "pass": lambda: run(pass_cmd)}
+            if INHERITED_NO_PYC:  # what the inherited environment costs, for the record
+                env_nopyc = {**ENV, "PYTHONDONTWRITEBYTECODE": "1"}
+                env_nopyc.pop("PYTHONPYCACHEPREFIX")
+                series["noop_nopyc"] = lambda: run(cmd, env=env_nopyc)
+            res = interleave(series, repeats)
             for r in res["noop"]:
                 check_ok(r, "no-op rebuild")
             noop = statistics.median(r["wall"] for r in res["noop"])
             bare = statistics.median(r["wall"] for r in res["pass"])
+            if "noop_nopyc" in res:
+                nopyc = statistics.median(r["wall"] for r in res["noop_nopyc"])
+                print(f"    the same no-op with PYTHONDONTWRITEBYTECODE=1 (modules compiled from source at every "
+                      f"start): median {nopyc * 1e3:.0f} ms, {nopyc / bare:.2f}x python -c pass")
+                row("corpus no-op / python -c pass, no .pyc (inherited env)", f"{nopyc / bare:.2f}x", "(info)")
             rss_noop, rss_pass = run(cmd, rss=True), run(pass_cmd, rss=True)
             print(f"    no-op median {noop * 1e3:.0f} ms, python -c pass median {bare * 1e3:.0f} ms, "
                   f"ratio {noop / bare:.2f}x; peak RSS {mb(rss_noop['maxrss_kb'])} vs {mb(rss_pass['maxrss_kb'])}")
@@ -560,6 +583,9 @@ def main() -> int:
                   f"({image_path.stat().st_size} bytes); {repeats} rebuilds vs cold texture step ...", flush=True)
             cmd = build_cmd(source, out, cache)
             check_ok(run(cmd), "initial build of the touched model")
+            warm = Path(tempfile.mkdtemp(prefix="store-", dir=tmp))  # warm-up of the baseline's imports
+            check_ok(run([PY, "-c", BASELINE, json.dumps({"store": str(warm),
+                                                           "jobs": texture_jobs(source, image_rel)})]), "warm-up")
             counter = [0]
 
             def rebuild():
@@ -623,6 +649,8 @@ def main() -> int:
                     counts.get("built", 0) == scale)
                 row(f"scale {scale}: cold build peak RSS (largest / tree)",
                     f"{mb(cold['maxrss_kb'])} / {mb(cold['tree_kb'])}")
+                run(pass_cmd)  # warm-ups
+                check_ok(run(cmd), "scale no-op (warm-up)")
                 res = interleave({"noop": lambda: run(cmd), "pass": lambda: run(pass_cmd)}, repeats)
                 for r in res["noop"]:
                     check_ok(r, "scale no-op")
