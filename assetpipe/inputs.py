@@ -39,10 +39,19 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
     """A unique, file-name-safe id per source: its stem, qualified by parent folders on clashes.
 
     Deterministic for a given set of inputs: ``a/Box.gltf`` and ``b/Box.gltf`` become
-    ``a_Box`` and ``b_Box``.
+    ``a_Box`` and ``b_Box``; no folder tells ``m/Box.gltf`` and ``m/Box.obj`` apart, so their
+    suffix does: ``Box_gltf`` and ``Box_obj``.
     """
+    # stems shared (case-insensitively) by several files of one folder take their suffix
+    by_folder: dict[tuple, int] = {}
+    for p in sources:
+        k = (p.resolve().parent, p.stem.lower())
+        by_folder[k] = by_folder.get(k, 0) + 1
+    name = {p: f"{p.stem}_{p.suffix[1:]}" if by_folder[(p.resolve().parent, p.stem.lower())] > 1 else p.stem
+            for p in sources}
+
     def candidate(p: Path, depth: int) -> str:
-        parts = [*p.resolve().parent.parts[len(p.resolve().parent.parts) - depth:], p.stem] if depth else [p.stem]
+        parts = [*p.resolve().parent.parts[len(p.resolve().parent.parts) - depth:], name[p]] if depth else [name[p]]
         return _UNSAFE.sub("_", "_".join(parts)).strip("_") or "model"
 
     depth = {p: 0 for p in sources}
@@ -60,9 +69,10 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
                 if depth[p] < len(p.resolve().parent.parts):
                     depth[p] += 1
                     progressed = True
-        if not progressed:  # identical paths cannot happen (deduplicated); be safe anyway
-            for n, p in enumerate(sorted(sources)):
-                ids[p] = f"{ids[p]}_{n}"
-            return ids
+        if not progressed:  # names differing only in case, in one folder: number them, start over
+            for ps in dup:
+                for n, p in enumerate(sorted(ps)):
+                    name[p] = f"{name[p]}_{n}"
+            depth = {p: 0 for p in sources}
 
 
