@@ -34,7 +34,8 @@ def default_cache_dir() -> Path:
     if env:
         return Path(env)
     xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "assetpipe"
+    # the XDG base directory spec: a relative path is invalid and ignored
+    return (Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache") / "assetpipe"
 
 
 def _split(digest: str) -> tuple[str, str]:
@@ -59,9 +60,18 @@ class Store:
         a, b = _split(digest)
         return self.root / kind / a / b
 
-    def _write(self, path: Path, data: bytes) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
+    def _read(self, path: Path) -> bytes | None:
+        """The file's bytes, or None when absent; any other failure makes the cache unusable."""
         try:
+            return path.read_bytes()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            raise CacheError(f"cannot read from the cache folder {self.root}: {exc.strerror}") from None
+
+    def _write(self, path: Path, data: bytes) -> None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
             with os.fdopen(fd, "wb") as f:
                 f.write(data)
@@ -91,9 +101,8 @@ class Store:
     def get_blob(self, digest: str) -> bytes | None:
         """The blob's bytes, verified; None if absent or corrupt (a corrupt one is deleted)."""
         path = self._path("objects", digest)
-        try:
-            data = path.read_bytes()
-        except FileNotFoundError:
+        data = self._read(path)
+        if data is None:
             return None
         if digest_bytes(data) != digest:
             self._drop(path, "content does not match its digest")
@@ -114,14 +123,13 @@ class Store:
     def get_record(self, key: str) -> dict | None:
         """The record under ``key``, verified, with every blob it names present and intact."""
         path = self._path("actions", key)
-        try:
-            raw = path.read_bytes()
-        except FileNotFoundError:
+        raw = self._read(path)
+        if raw is None:
             return None
         try:
             wrapper = json.loads(raw)
             record = wrapper["record"]
-            ok = wrapper["check"] == digest_bytes(canonical_json(record))
+            ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
         except (ValueError, KeyError, TypeError):
             ok = False
         if not ok:
