@@ -22,9 +22,11 @@ _vk: ModuleType | None = None
 
 
 def cache_root() -> Path:
-    """The assetpipe cache root: ``$XDG_CACHE_HOME/assetpipe`` (default ``~/.cache/assetpipe``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "assetpipe"
+    """The assetpipe cache root, the build cache's: ``$ASSETPIPE_CACHE``, else
+    ``$XDG_CACHE_HOME/assetpipe``, else ``~/.cache/assetpipe``."""
+    from cache.store import default_cache_dir  # noqa: PLC0415
+
+    return default_cache_dir()
 
 
 def renderer_env(base: dict[str, str] | None = None) -> dict[str, str]:
@@ -33,13 +35,16 @@ def renderer_env(base: dict[str, str] | None = None) -> dict[str, str]:
     * ``VK_DRIVER_FILES`` (and the older ``VK_ICD_FILENAMES``): lavapipe only, so a machine with
       a GPU renders exactly what the tests expect.
     * ``MESA_SHADER_CACHE_DIR``: Mesa's shader cache under the assetpipe cache, not in ``~``.
-    * ``XDG_CACHE_HOME``: kept if set (the validation layer writes its cache there).
+    * ``XDG_CACHE_HOME``: where the validation layer writes its cache; kept if set, else put
+      under the assetpipe cache so nothing lands in ``~/.cache`` beside it.
     """
     env = dict(os.environ if base is None else base)
     icd = env.get("ASSETPIPE_VK_ICD", str(LAVAPIPE_ICD))
     env["VK_DRIVER_FILES"] = icd
     env["VK_ICD_FILENAMES"] = icd
     env.setdefault("MESA_SHADER_CACHE_DIR", str(cache_root() / "mesa_shader_cache"))
+    env.setdefault("ASSETPIPE_CACHE", str(cache_root()))  # the worker resolves the same root
+    env.setdefault("XDG_CACHE_HOME", str(cache_root() / "xdg"))
     return env
 
 

@@ -1,6 +1,6 @@
 """GLSL 450 -> SPIR-V with ``glslangValidator -V``, cached by the content digest of the source.
 
-The cache lives outside the repository: ``$XDG_CACHE_HOME/assetpipe/shaders`` by default, or
+The cache lives outside the repository, under the assetpipe cache root (``shaders/``), or
 a directory passed in. A cached module is named after the SHA-256 of (stage, source), so an
 edited shader is recompiled and an unchanged one never is.
 """
@@ -22,7 +22,7 @@ SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 
 
 def default_cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/assetpipe/shaders`` (``~/.cache/...`` when unset)."""
+    """``shaders/`` under the assetpipe cache root (see :func:`renderer._vk.cache_root`)."""
     return cache_root() / "shaders"
 
 
