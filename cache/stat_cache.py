@@ -29,9 +29,9 @@ class StatCache:
         if self.path is not None:
             try:
                 data = json.loads(self.path.read_bytes())
-                if data.get("version") == VERSION:
-                    self.entries = data["entries"]
-            except (OSError, ValueError, KeyError, TypeError):
+                if isinstance(data, dict) and data.get("version") == VERSION and isinstance(data["entries"], dict):
+                    self.entries = {k: e for k, e in data["entries"].items() if isinstance(e, list) and len(e) == 4}
+            except (OSError, ValueError, KeyError):
                 self.entries = {}
 
     def digest(self, path: str | Path) -> str:
@@ -61,8 +61,11 @@ class StatCache:
     def save(self) -> None:
         if self.path is None or not self.dirty:
             return
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".stat-cache.")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".stat-cache.")
+        except OSError:  # not saved: the next build re-reads the files, nothing worse
+            return
         try:
             with os.fdopen(fd, "w") as f:
                 json.dump({"version": VERSION, "entries": self.entries}, f, separators=(",", ":"))
