@@ -284,8 +284,9 @@ def op_matrix(op: str, value) -> np.ndarray:
 def compose_ops(ops: Sequence[tuple[str, Any]]) -> np.ndarray:
     """``M = O1 @ O2 @ ... @ On`` for ops ``[(name, value), ...]`` (list order)."""
     m = np.eye(4)
-    for name, value in ops:
-        m = m @ op_matrix(name, value)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported by the caller
+        for name, value in ops:
+            m = m @ op_matrix(name, value)
     return m
 
 
@@ -316,6 +317,8 @@ def _instance(ctx: _Ctx, value: Any, where: str) -> np.ndarray:
     if not np.all(np.isfinite(m)):
         raise ctx.fail(where, "transform is not finite (overflow)")
     sv = np.linalg.svd(m[:3, :3], compute_uv=False)
+    if not np.all(np.isfinite(sv)):
+        raise ctx.fail(where, "transform is not finite (overflow)")
     if not sv[-1] > 1e-12 * max(1.0, sv[0]):
         raise ctx.fail(where, "transform is singular (a zero scaling?)")
     return m
