@@ -24,9 +24,11 @@ def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
     chunks = []
     offset = 0
     for name in sorted(arrays):
-        a = np.ascontiguousarray(arrays[name])
+        a = np.asarray(arrays[name], order="C")  # not ascontiguousarray: it makes 0-d arrays 1-d
         if a.dtype.hasobject:
             raise TypeError(f"array {name!r} has object dtype")
+        if a.dtype.fields is not None or a.dtype.subdtype is not None:  # dtype.str would lose the fields
+            raise TypeError(f"array {name!r} has a structured dtype")
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)
         pad = -offset % _ALIGN
         chunks.append(b"\0" * pad)
@@ -41,15 +43,25 @@ def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
 
 
 def unpack(data: bytes) -> tuple[dict, dict[str, np.ndarray]]:
+    """(meta, arrays) of a pack; ValueError for anything that is not a well-formed pack."""
     if not data.startswith(MAGIC) or len(data) < 8:
         raise ValueError("not an assetpipe pack")
     (hlen,) = struct.unpack_from("<I", data, 4)
-    header = json.loads(data[8:8 + hlen])
     base = 8 + hlen
-    arrays = {}
-    for e in header["arrays"]:
-        start = base + e["offset"]
-        arr = np.frombuffer(data, dtype=np.dtype(e["dtype"]), count=int(np.prod(e["shape"], dtype=np.int64)),
-                            offset=start)
-        arrays[e["name"]] = arr.reshape(e["shape"])
-    return header["meta"], arrays
+    if base > len(data):
+        raise ValueError("assetpipe pack: header runs past the end")
+    try:
+        header = json.loads(data[8:base])
+        arrays = {}
+        for e in header["arrays"]:
+            dtype = np.dtype(e["dtype"])
+            shape = tuple(int(d) for d in e["shape"])
+            count = int(np.prod(shape, dtype=np.int64))
+            if dtype.hasobject or min(shape, default=0) < 0 or e["offset"] < 0 \
+                    or e["size"] != count * dtype.itemsize or base + e["offset"] + e["size"] > len(data):
+                raise ValueError(f"bad array entry {e!r}")
+            arr = np.frombuffer(data, dtype=dtype, count=count, offset=base + e["offset"])
+            arrays[e["name"]] = arr.reshape(shape)
+        return header["meta"], arrays
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"assetpipe pack: malformed header ({exc!r})") from None
