@@ -613,3 +613,27 @@ def test_encode_scene_output_extensions_and_missing_inputs():
     del models[town.objects[0].key]
     with pytest.raises(KeyError, match="object 0: no built model"):
         encode_scene_output(town, models, tex)
+
+
+# -- corpus: the import step's real material records ----------------------------------------
+
+@pytest.mark.corpus
+def test_attributes_and_plan_on_corpus_models(corpus, tmp_path):
+    from assetpipe.steps import task_import
+
+    full = ("position", "uv0", "normal", "tangent", "uv1", "color")
+    want = {"Duck": ("position", "uv0", "normal", "color"),
+            "Avocado": ("position", "uv0", "normal", "tangent", "color"),
+            "MultiUVTest": ("position", "uv0", "normal", "uv1", "color")}
+    objects = []
+    for name, expected in want.items():
+        src = corpus / "models" / name / "glTF" / f"{name}.gltf"
+        meta = task_import(str(tmp_path / "store"), str(src))["meta"]
+        assert attributes_needed(meta["materials"], full) == expected, name
+        # a model shares materials with itself, images compared by content digest
+        assert check_shared_materials([meta, meta]) == []
+        objects.append({"model": {"name": str(src)}, "max_screen_px": 100})
+    path = _write(tmp_path, {"scene": {"objects": objects, "texture_budget": 64}})
+    plan = plan_scene([load_scene(path)])
+    assert len(plan.models) == 3
+    assert all(m.texture_max_size == 64 for m in plan.models.values())
