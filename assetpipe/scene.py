@@ -245,13 +245,7 @@ class _Ctx:
         if not full.is_file():
             what = "is not a file" if full.exists() else "file not found"
             raise self.fail(where, f"{value}: {what} ({kind}, relative to the scene's folder)")
-        return Path(_normpath(full))
-
-
-def _normpath(p: Path) -> str:
-    import os
-
-    return os.path.normpath(os.path.abspath(p))
+        return full.resolve()
 
 
 # -- transforms ------------------------------------------------------------------------------
@@ -527,8 +521,9 @@ class ModelPlan:
     max_lod_distance: levels whose switch distance exceeds it are never selected (inf: all
       may be). min_lod_distance: levels finer than the one selected at it are never selected.
       Both without the model's bounds; :meth:`lod_range` refines them with its radius.
-    texture_max_size: the largest texture size (px, a power of two) any use can sample, min'd
-      with the scene budgets and the build's ``TextureOptions.max_size``; None: unbounded.
+    texture_max_size: the largest texture size (px) any use can sample (the next power of two
+      of its on-screen size), min'd with the scene budgets and the build's
+      ``TextureOptions.max_size``; None: unbounded.
       Without bounds; :meth:`texture_size` refines it with the radius.
     needs_uv: True when an object gives its own texture; None: decide from the imported
       materials with :func:`attributes_needed`.
@@ -679,7 +674,7 @@ class ScenePlan:
         return sorted({p for k in self.models for p in k.sources})
 
     def referenced(self, path: str | Path) -> bool:
-        p = Path(_normpath(Path(path)))
+        p = Path(path).resolve()
         return any(p in k.sources for k in self.models) or p in self.textures
 
     def unreferenced_reasons(self, paths: Iterable[str | Path]) -> list[str]:
@@ -688,7 +683,7 @@ class ScenePlan:
 
     def object_texture_size(self, path: str | Path, radii: Mapping[ModelKey, float] | None = None) -> int | None:
         """Size limit of an object's own texture: the largest over the objects using it."""
-        p = Path(_normpath(Path(path)))
+        p = Path(path).resolve()
         uses = self.textures.get(p, ())
         if not uses:
             raise KeyError(p)
