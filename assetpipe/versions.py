@@ -6,7 +6,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 
 IMPORT = 2  # 2: geometry-only blob
 MESH = 1
-LOD = 1
+LOD = 2  # 2: meshopt SimplifySparse (unreferenced twins no longer lock vertices)
 TEXTURE = 1
 ENCODE = 1
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

@@ -93,3 +93,39 @@ def test_empty_and_tiny():
         assert out.shape[1] == 3 and len(out) <= 1
     with pytest.raises(ValueError):
         S.simplify(pos, np.array([[0, 1, 7]], np.uint32), 1)
+
+
+def test_unreferenced_twins_do_not_lock_vertices():
+    """Welding leaves unreferenced copies of vertices in the buffer (and a coarser LOD level
+    stops using vertices): meshoptimizer without SimplifySparse paired each vertex with its
+    unreferenced twin, called it an unmatched seam and locked it, so nothing collapsed."""
+    pos, tri = _sphere()  # 5120 triangles
+    twins = np.concatenate([pos, pos])  # vertices N..2N-1: same positions, never referenced
+    out, err = S.simplify(twins, tri, 640)
+    assert 600 <= len(out) <= 640 and out.max() < len(pos)
+    uv = (twins[:, :2] * 0.5 + 0.5).astype(np.float32)
+    out, _ = S.simplify(twins, tri, 640, attributes=uv)
+    assert 600 <= len(out) <= 640
+    # same result and the same error as without the twins (errors keep their meaning)
+    ref, ref_err = S.simplify(pos, tri, 640)
+    out, err = S.simplify(twins, tri, 640)
+    np.testing.assert_array_equal(out, ref)
+    assert err == pytest.approx(ref_err, rel=1e-6)
+
+
+def test_prune_flag_keeps_the_big_part():
+    """Smoke test of ``prune=True`` (meshopt_SimplifyPrune): the target is met and the tiny
+    loose parts go before the main surface. (meshoptimizer also collapses these tetrahedra
+    away without pruning; a corpus case where only pruning helps is in test_lod.py.)"""
+    pos, tri = _sphere(4)  # 5120 triangles, radius 1
+    # 50 tiny closed tetrahedra far from the sphere
+    extra_p, extra_t = [], []
+    for k in range(50):
+        c = np.array([3.0 + k * 0.1, 0, 0])
+        extra_p.append(c + 0.01 * np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]))
+        extra_t.append(len(pos) + 4 * k + np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]]))
+    p = np.concatenate([pos, *extra_p])
+    t = np.concatenate([tri, *extra_t]).astype(np.uint32)
+    pruned, err = S.simplify(p, t, 300, prune=True)
+    assert 0 < len(pruned) <= 300 and np.isfinite(err)
+    assert pruned.max() < len(pos)  # the tiny parts went first, the sphere stays
