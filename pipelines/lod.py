@@ -36,7 +36,7 @@ import numpy as np
 
 from pipelines import simplify as simp
 from pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
-from pipelines.surface_error import measure_levels, prepare_reference
+from pipelines.surface_error import Reference, SurfaceError, measure_levels, prepare_reference
 
 #: Bump when the output of this step changes for the same input and options (cache key).
 
@@ -148,18 +148,46 @@ def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOpti
 
 def _simplify_step(pos32: np.ndarray, idx: np.ndarray, target: int, target_error: float,
                    attrs: np.ndarray | None, weights: np.ndarray | None,
-                   opts: LodOptions) -> tuple[np.ndarray, float, bool]:
+                   opts: LodOptions, ref: Reference | None
+                   ) -> tuple[np.ndarray, float, bool, SurfaceError | None]:
+    """One level from ``idx``: (indices, simplifier error, sloppy, measured error or None).
+
+    The regular simplifier runs first. When it stops above ``sloppy_slack`` x the target
+    (topology allows no more collapses), the alternatives are tried from the same level:
+    meshoptimizer's component pruning (keeps seams closed) and, with ``sloppy_fallback``, the
+    sloppy simplifier. Of the results within the slack, the one with the lowest *measured*
+    Hausdorff distance to level 0 wins (``ref`` given), else the lowest simplifier estimate;
+    when none gets within the slack, the one with the fewest triangles.
+    """
     if opts.simplifier == "fast-simplification":
         out, err = simp.simplify_fast(pos32, idx, target, preserve_border=opts.lock_border)
-        return out, err, False
+        return out, err, False, None
     out, err = simp.simplify(pos32, idx, target, attributes=attrs, attribute_weights=weights,
                              lock_border=opts.lock_border, target_error=target_error)
-    if (opts.sloppy_fallback and not opts.lock_border and opts.target_errors is None
-            and out.shape[0] > opts.sloppy_slack * target):
+    slack = opts.sloppy_slack * target
+    if opts.target_errors is not None or out.shape[0] <= slack or opts.lock_border:
+        return out, err, False, None
+    cands = [(out, err, False)]
+    p_out, p_err = simp.simplify(pos32, idx, target, attributes=attrs, attribute_weights=weights,
+                                 target_error=target_error, prune=True)
+    if p_out.shape[0] > 0:
+        cands.append((p_out, p_err, False))
+    if opts.sloppy_fallback:
         s_out, s_err = simp.simplify_sloppy(pos32, idx, target, cleanup=True)
-        if 0 < s_out.shape[0] < out.shape[0]:
-            return s_out, s_err, True
-    return out, err, False
+        if s_out.shape[0] > 0:
+            cands.append((s_out, s_err, True))
+    measured: list[SurfaceError | None] = [None] * len(cands)
+    if ref is not None:
+        measured = list(measure_levels(ref, [c[0] for c in cands]))
+    within = [i for i, c in enumerate(cands) if c[0].shape[0] <= slack]
+    if within:
+        def cost(i: int) -> float:
+            m = measured[i]
+            return m.hausdorff_rel if m is not None else cands[i][1]
+        best = min(within, key=lambda i: (cost(i), cands[i][0].shape[0]))
+    else:
+        best = min(range(len(cands)), key=lambda i: cands[i][0].shape[0])
+    return (*cands[best], measured[best])
 
 
 def build_lod_chain(
@@ -208,7 +236,13 @@ def build_lod_chain(
     # act as seams and block collapses.
     welded = weld_for_simplification(idx, pos, uv, normals, other_attributes,
                                      options.weld_normal_seams)
+    # The fixed reference every level is measured against; prepared first, because a step
+    # whose simplifier stalls picks among its alternatives by measured error.
+    ref = None
+    if options.measure and m0 > 0:
+        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
     raw: list[tuple[np.ndarray, float, bool]] = [(welded, 0.0, False)]
+    known: dict[int, SurfaceError] = {}  # level -> error already measured while choosing
     steps = options.target_errors if options.target_errors is not None else options.ratios
     cumulative = 0.0
     for step in steps[1:]:
@@ -223,11 +257,14 @@ def build_lod_chain(
             target, target_error = max(int(round(step * m0)), options.min_triangles), simp.NO_ERROR_LIMIT
         if target > max_allowed or prev_n <= options.min_triangles:
             break
-        out, err, sloppy = _simplify_step(pos32, prev, target, target_error, attrs, weights, options)
+        out, err, sloppy, measured = _simplify_step(pos32, prev, target, target_error, attrs,
+                                                    weights, options, ref)
         if not 0 < out.shape[0] <= max_allowed:
             break
         cumulative += err
         raw.append((out, cumulative, sloppy))
+        if measured is not None:
+            known[len(raw) - 1] = measured
 
     # --- measure every level against level 0 with one fixed reference sample set
     ppu = options.pixels_per_unit_at_unit_distance()
@@ -237,8 +274,9 @@ def build_lod_chain(
         for k, (out, err, sloppy) in enumerate(raw[1:], start=1):
             levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy))
     elif len(raw) > 1:
-        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
-        errors = measure_levels(ref, [r[0] for r in raw[1:]])
+        todo = [k for k in range(1, len(raw)) if k not in known]
+        known.update(zip(todo, measure_levels(ref, [raw[k][0] for k in todo])))
+        errors = [known[k] for k in range(1, len(raw))]
         scale = diag if diag > 0 and math.isfinite(diag) else 0.0
         running = 0.0
         for k, ((out, err, sloppy), e) in enumerate(zip(raw[1:], errors), start=1):

@@ -24,10 +24,15 @@ class LodOptions:
       UVs as attributes when given; plain meshopt otherwise) or "fast-simplification".
     lock_border: keep open-border vertices where they are (meshopt: SimplifyLockBorder;
       fast-simplification: preserve_border).
-    sloppy_fallback: when the regular simplifier ends above ``sloppy_slack`` x the target
-      (topology prevents further collapses), try meshoptimizer's sloppy simplifier from the
-      same level, clean its output, and keep it if it gets nearer the target. Never with
-      ``lock_border`` (sloppy cannot lock borders).
+    sloppy_slack, sloppy_fallback: when the regular simplifier ends above ``sloppy_slack`` x
+      the target (topology prevents further collapses), alternatives are tried from the same
+      level: meshoptimizer's component pruning (removes whole small parts; seams stay closed)
+      and, with ``sloppy_fallback``, the sloppy simplifier (output cleaned). Of the results
+      within the slack, the lowest *measured* Hausdorff distance wins (the simplifier's
+      estimate when ``measure`` is off); if none is within it, the fewest triangles. Never
+      with ``lock_border`` (neither alternative keeps borders) nor ``target_errors``. The
+      slack was 1.5; at 1.1 the merged spider reaches 1/16 (79 triangles for 85, Hausdorff
+      13.1% of the diagonal, by pruning) instead of stopping at 105 triangles at 25.0%.
     uv_weight, normal_weight: attribute weights for "meshopt-attr" (positions are in units
       of the bounding-box extent; UVs in texture units; normals unit vectors). Small on
       purpose: larger normal weights cost geometric error (spider at 1/8: 8.3% of the
@@ -56,7 +61,7 @@ class LodOptions:
     simplifier: str = "meshopt-attr"
     lock_border: bool = False
     sloppy_fallback: bool = True
-    sloppy_slack: float = 1.5
+    sloppy_slack: float = 1.1
     uv_weight: float = 0.25
     normal_weight: float = 0.1
     weld_normal_seams: bool = True
