@@ -12,6 +12,7 @@ The no-op path (every asset up to date) imports neither numpy nor any importer.
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ class AssetResult:
 
     source: str
     id: str
-    status: str  # "built" | "cached" | "failed"
+    status: str  # "built" | "cached" | "failed" | "skipped" (a scene build: not referenced)
     outputs: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     error: str | None = None
@@ -37,6 +38,7 @@ class AssetResult:
     steps: list[dict] = field(default_factory=list)
     stats: dict = field(default_factory=dict)
     traceback: str | None = None
+    skipped: list[str] = field(default_factory=list)  # what was not built for it, and why
 
     def to_json(self) -> dict:
         d = {"source": self.source, "id": self.id, "status": self.status, "outputs": self.outputs,
@@ -46,6 +48,8 @@ class AssetResult:
             d["steps"] = self.steps
         if self.stats:
             d["stats"] = self.stats
+        if self.skipped:
+            d["skipped"] = self.skipped
         if self.traceback:
             d["traceback"] = self.traceback
         return d
@@ -84,75 +88,112 @@ def options_digest(options_json: dict) -> str:
 
 
 def _outputs_list(out_dir: Path, model_id: str) -> list[str]:
-    return [str(out_dir / f"{model_id}.json"), str(out_dir / f"{model_id}-mat.json"),
-            str(out_dir / f"{model_id}.asset.json")]
+    base = os.path.join(out_dir, model_id)
+    return [f"{base}.json", f"{base}-mat.json", f"{base}.asset.json"]
+
+
+@dataclass
+class AssetSpec:
+    """One model to build: its source (LOD0 file), id, options, and for scene builds the
+    scene's plan for it. ``key`` names its entry in the output state."""
+
+    source: Path
+    id: str
+    options: object
+    options_digest: str
+    key: str
+    plan: object = None
+    extra_sources: tuple = ()
+    scenes: tuple = ()  # the scene files that asked for it
 
 
 def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1,
               cache_dir: Path | None = None,
               on_result: Callable[[AssetResult, int, int], None] | None = None) -> BuildReport:
+    """Build ``inputs`` (model files, folders, and scene files ``*.json``) into ``out_dir``.
+
+    With scene files, only what the scenes reference is built (the other inputs are candidates,
+    reported as skipped), each model with what its scenes need; ``OUT/<scene>.scene.json`` is
+    written per scene."""
     from cache.stat_cache import StatCache
     from cache.store import Store, default_cache_dir
     from assetpipe.state import OutputState
     from assetpipe.writer import sweep_tmp
 
     t0 = time.perf_counter()
-    sources = discover_inputs(inputs)
-    ids = assign_ids(sources)
+    scene_paths = [Path(p) for p in inputs if Path(p).suffix.lower() == ".json"]
+    model_inputs = [p for p in inputs if Path(p).suffix.lower() != ".json"]
+    sources = discover_inputs(model_inputs) if model_inputs else []
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     sweep_tmp(out_dir)
     store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
     stat = StatCache(store.root / "stat-cache.json")
     state = OutputState(out_dir)
-    opt_digest = options_digest(options.to_json())
+    results: list[AssetResult] = []
+    scene_run = None
+    if scene_paths:
+        from assetpipe.scene_build import SceneRun
 
-    results: dict[Path, AssetResult] = {}
-    todo: list[Path] = []
-    why: dict[Path, str] = {}
-    total = len(sources)
-    for src in sources:
-        reason = state.check(src, ids[src], opt_digest, stat)
+        scene_run = SceneRun(scene_paths, sources, options, out_dir)
+        specs = scene_run.specs()
+        results.extend(scene_run.failed_results + scene_run.skipped_results)
+    else:
+        ids = assign_ids(sources)
+        digest = options_digest(options.to_json())
+        specs = [AssetSpec(source=s, id=ids[s], options=options, options_digest=digest, key=os.path.abspath(s))
+                 for s in sources]
+
+    by_key: dict[str, AssetResult] = {}
+    todo: list[AssetSpec] = []
+    why: dict[str, str] = {}
+    total = len(specs)
+    for spec in specs:
+        reason = state.check_entry(spec.key, spec.id, spec.options_digest, stat)
         if reason is None:
-            entry = state.assets[str(src.resolve())]
-            r = AssetResult(source=str(src), id=ids[src], status="cached", outputs=_outputs_list(out_dir, ids[src]),
-                            warnings=list(entry.get("warnings", [])), reason="up to date",
-                            stats=entry.get("stats", {}))
-            results[src] = r
+            entry = state.assets[spec.key]
+            r = AssetResult(source=str(spec.source), id=spec.id, status="cached",
+                            outputs=_outputs_list(out_dir, spec.id), warnings=list(entry.get("warnings", [])),
+                            reason="up to date", stats=entry.get("stats", {}))
+            r.skipped = list(entry.get("skipped", []))
+            by_key[spec.key] = r
             if on_result:
-                on_result(r, len(results), total)
+                on_result(r, len(by_key), total)
         else:
-            todo.append(src)
-            why[src] = reason
+            todo.append(spec)
+            why[spec.key] = reason
 
     explain_steps = None
     if todo:
-        explain_steps = _build_changed(todo, ids, why, out_dir, options, store, stat, state, opt_digest, jobs,
-                                       results, on_result, total)
+        explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total)
+    results = [by_key[s.key] for s in specs] + results
+    if scene_run is not None:
+        results.extend(scene_run.write_outputs(state, store, stat, by_key, jobs))
+        state.forget_entries(scene_run.stale_entries(state))
     forgotten = state.forget_missing_sources()
     removed = state.delete_unowned_outputs()
-    if todo or forgotten or removed:
+    if todo or forgotten or removed or state.touched or scene_run is not None:
         state.save(explain_steps)
     stat.save()
-    ordered = [results[s] for s in sources]
-    return BuildReport(results=ordered, seconds=time.perf_counter() - t0, removed=removed,
+    return BuildReport(results=results, seconds=time.perf_counter() - t0, removed=removed,
                        cache_dropped=list(store.dropped))
 
 
-def _build_changed(todo, ids, why, out_dir, options, store, stat, state, opt_digest, jobs, results,
-                   on_result, total) -> dict:
+def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total) -> dict:
     from assetpipe.graph import AssetState, Graph
 
     explain_prev = state.load_explain()
-    graph = Graph(store, stat, options, explain_prev, jobs=jobs)
-    assets = [AssetState(source=s, id=ids[s]) for s in todo]
+    graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs)
+    assets = [AssetState(source=s.source, id=s.id, options=s.options, plan=s.plan, extra_sources=s.extra_sources,
+                         key=s.key) for s in todo]
     graph.build(assets)
     explain_steps = dict(explain_prev)
-    for a in assets:
-        key = str(a.source.resolve())
+    for spec, a in zip(todo, assets):
+        key = spec.key
         r = AssetResult(source=str(a.source), id=a.id, status="failed", seconds=a.seconds)
         r.steps = [{"step": run.step, "ran": run.ran, **({"reason": run.reason} if run.ran else {})}
                    for run in a.runs]
+        r.skipped = list(dict.fromkeys(a.skipped))
         if not a.failed:
             try:
                 table, notes = state.materialise(store, a.outputs, state.assets.get(key))
@@ -162,19 +203,23 @@ def _build_changed(todo, ids, why, out_dir, options, store, stat, state, opt_dig
                 ran = [run for run in a.runs if run.ran]
                 r.status = "built" if ran else "cached"
                 reasons = [f"{run.step}: {run.reason}" for run in ran] + notes
-                r.reason = "; ".join(reasons) if reasons else f"results cached ({why[a.source]})"
+                r.reason = "; ".join(reasons) if reasons else f"results cached ({why[key]})"
                 r.outputs = _outputs_list(out_dir, a.id)
                 r.warnings = a.warnings
                 r.stats = (a.records.get("encode") or {}).get("meta", {}).get("stats", {})
-                state.assets[key] = {"id": a.id, "options": opt_digest, "inputs": a.inputs, "outputs": table,
-                                     "warnings": a.warnings, "stats": r.stats}
+                entry = {"id": a.id, "options": spec.options_digest, "inputs": a.inputs, "outputs": table,
+                         "warnings": a.warnings, "stats": r.stats, "skipped": r.skipped}
+                if spec.scenes:
+                    entry["scenes"] = [str(p) for p in spec.scenes]
+                    entry["source"] = str(a.source.resolve())
+                state.assets[key] = entry
                 explain_steps[key] = a.key_inputs
         if a.failed:
             r.error = a.error
             r.warnings = a.warnings
             r.traceback = a.internal
-            r.reason = why[a.source]
-        results[a.source] = r
+            r.reason = why[key]
+        by_key[key] = r
         if on_result:
-            on_result(r, len(results), total)
+            on_result(r, len(by_key), total)
     return explain_steps

@@ -28,6 +28,7 @@ class OutputLod:
     vertex_count: int  # the prefix of the vertex range this level references
     error: dict = field(default_factory=dict)
     switch_distance: float = 0.0
+    chain_level: int | None = None  # its level in the full chain, when levels were skipped
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,9 +119,12 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
             off, size = lod_ranges[mi][li]
             err = {k: _num(v) for k, v in lod.error.items()} if lod.error else {
                 "simplifier": 0.0, "hausdorff": 0.0, "rms": 0.0, "hausdorffRel": 0.0, "rmsRel": 0.0}
-            lods.append({"level": li, "idxOffset": off, "idxSize": size,
-                         "triangles": int(lod.indices.shape[0]), "vertexCount": int(lod.vertex_count),
-                         "error": err, "switchDistance": _num(lod.switch_distance)})
+            entry = {"level": li, "idxOffset": off, "idxSize": size,
+                     "triangles": int(lod.indices.shape[0]), "vertexCount": int(lod.vertex_count),
+                     "error": err, "switchDistance": _num(lod.switch_distance)}
+            if lod.chain_level is not None and lod.chain_level != li:
+                entry["chainLevel"] = lod.chain_level
+            lods.append(entry)
         side_meshes.append({"id": m.id, "name": m.name, "materialId": m.material_id,
                             "vertexCount": int(m.vertices.shape[0]),
                             "triangleCount": int(m.lods[0].indices.shape[0]),

@@ -61,6 +61,17 @@ class AssetState:
     texture_jobs: dict = field(default_factory=dict)  # (material, role) -> texture key
     outputs: dict = field(default_factory=dict)  # OUT-relative path -> blob digest
     seconds: float = 0.0  # time of the steps run for this asset (a shared step counts for each)
+    options: object = None  # BuildOptions for this asset (None: the graph's)
+    plan: object = None  # a scene's ModelPlan: what the scenes need of this model (None: everything)
+    extra_sources: tuple = ()  # a hand-made LOD list: the files of levels 1.. (level 0 is ``source``)
+    skipped: list[str] = field(default_factory=list)  # what was not built, and why
+    uv_sets0: list = field(default_factory=list)
+    key: str = ""  # its entry in the output state (and in explain.json)
+
+    @property
+    def level_sources(self) -> list[tuple[str, Path]]:
+        """(step label suffix, file) per level file: ("", LOD0), (" L1", ...), ..."""
+        return [("", self.source)] + [(f" L{k}", p) for k, p in enumerate(self.extra_sources, start=1)]
 
     @property
     def failed(self) -> bool:
@@ -139,10 +150,25 @@ class Graph:
         self.previous = previous
         self.libs = versions.library_versions()
         self.executor = Executor(jobs)
-        self.mesh_opts = steps.options_to_json(options.mesh)
-        self.lod_opts = steps.options_to_json(options.lod)
-        self.tex_opts = steps.options_to_json(options.texture)
-        self.layout = list(options.mesh.layout)
+
+    def _options(self, a: AssetState):
+        return a.options if a.options is not None else self.options
+
+    def _mesh_opts(self, a: AssetState) -> dict:
+        return steps.options_to_json(self._options(a).mesh)
+
+    def _lod_opts(self, a: AssetState) -> dict | None:
+        return steps.options_to_json(self._options(a).lod)
+
+    def _layout(self, a: AssetState) -> list[str]:
+        return list(self._options(a).mesh.layout)
+
+    def _tex_opts(self, a: AssetState) -> dict:
+        """Texture options; a scene caps the size at what its objects can show on screen."""
+        tex = self._options(a).texture
+        if a.plan is not None:
+            tex = a.plan.texture_options_for(a.records["import"]["meta"].get("radius"), tex)
+        return steps.options_to_json(tex)
 
     # -- keys ---------------------------------------------------------------------------
     def _key_inputs(self, step: str, inputs: dict, opts) -> dict:
@@ -189,7 +215,7 @@ class Graph:
         for key, owner_list in owners.items():
             for a, label, kin in owner_list:
                 ran = key in to_run
-                prev = self.previous.get(str(a.source.resolve()), {}).get(label)
+                prev = self.previous.get(a.key, {}).get(label)
                 a.runs.append(StepRun(label, ran, explain(prev, kin) if ran else None))
                 a.records[label] = results.get(key)
         return results
@@ -210,34 +236,42 @@ class Graph:
     def _import(self, assets: list[AssetState]) -> None:
         jobs = []
         for a in assets:
-            try:
-                src_digest = self.stat.digest(a.source)
-            except FileNotFoundError:
-                a.error = f"{a.source}: file not found"
-                continue
-            a.inputs[str(a.source.resolve())] = src_digest
-            kin = self._key_inputs("import", {"source": src_digest}, None)
-            key = digest_json(kin)
-            rec = self.store.get_record(key)
-            if rec is not None and not self._deps_match(a, rec):
-                rec = None
-            if rec is not None:
-                a.key_inputs["import"] = _with_deps(kin, rec)
-                a.records["import"] = rec
-                a.runs.append(StepRun("import", False))
-                continue
-            jobs.append(([a], "import", kin, (steps.task_import, str(self.store.root), str(a.source))))
+            for suffix, src in a.level_sources:
+                label = "import" + suffix
+                try:
+                    src_digest = self.stat.digest(src)
+                except FileNotFoundError:
+                    a.error = f"{src}: file not found"
+                    break
+                a.inputs[str(src.resolve())] = src_digest
+                kin = self._key_inputs("import", {"source": src_digest}, None)
+                rec = self.store.get_record(digest_json(kin))
+                if rec is not None and not self._deps_match(src, rec):
+                    rec = None
+                if rec is not None:
+                    a.key_inputs[label] = _with_deps(kin, rec)
+                    a.records[label] = rec
+                    a.runs.append(StepRun(label, False))
+                    continue
+                jobs.append(([a], label, kin, (steps.task_import, str(self.store.root), str(src))))
         if jobs:  # a record under the same key may exist but be stale (a .bin changed): overwrite
             self._run_uncached(jobs)
         for a in assets:
-            rec = a.records.get("import")
-            if rec is not None:
-                base = a.source.parent
-                for d in rec["meta"]["deps"]:
-                    a.inputs[str((base / d["path"]).resolve())] = d["digest"]
+            for suffix, src in a.level_sources:
+                rec = a.records.get("import" + suffix)
+                if rec is not None:
+                    for d in rec["meta"]["deps"]:
+                        a.inputs[str((src.parent / d["path"]).resolve())] = d["digest"]
+            if a.extra_sources and not a.failed:
+                from assetpipe.scene import check_shared_materials
 
-    def _deps_match(self, a: AssetState, rec: dict) -> bool:
-        base = a.source.parent
+                metas = [a.records["import" + suffix]["meta"] for suffix, _ in a.level_sources]
+                problems = check_shared_materials(metas, [p.name for _, p in a.level_sources])
+                if problems:
+                    a.error = f"{a.source}: hand-made LOD list: " + "; ".join(problems)
+
+    def _deps_match(self, source: Path, rec: dict) -> bool:
+        base = source.parent
         for d in rec["meta"]["deps"]:
             try:
                 if self.stat.digest(base / d["path"]) != d["digest"]:
@@ -257,7 +291,7 @@ class Graph:
             for a in assets:
                 a.seconds += secs
                 a.key_inputs[label] = kin
-                prev = self.previous.get(str(a.source.resolve()), {}).get(label)
+                prev = self.previous.get(a.key, {}).get(label)
                 a.runs.append(StepRun(label, True, explain(prev, kin)))
                 if status == "ok":
                     a.records[label] = value
@@ -271,16 +305,47 @@ class Graph:
                 results[key] = value
         return results
 
+    def _uv_sets(self, a: AssetState, meta: dict) -> list[int]:
+        """UV set per mesh for the uv0 slot; -1 when a scene build needs no UVs for the mesh."""
+        uvs = steps.uv_sets(meta["materials"], meta["meshMaterials"])
+        if a.plan is None or "uv0" not in self._layout(a):
+            return uvs
+        from assetpipe.scene import attribute_reasons, attributes_needed
+
+        mats = meta["materials"]
+        out, skipped = [], 0
+        for uv, m in zip(uvs, meta["meshMaterials"]):
+            used = [mats[m]] if 0 <= m < len(mats) else []
+            needed = attributes_needed(used, self._layout(a), object_texture=a.plan.needs_uv is True)
+            if "uv0" in needed:
+                out.append(uv)
+            else:
+                out.append(-1)
+                skipped += 1
+        if skipped:
+            why = attribute_reasons(a.plan.label, ["uv0"], [])[0]
+            a.skipped.append(f"{why} in {skipped} of {len(uvs)} mesh(es): written as zeros")
+        return out
+
     def _mesh_and_textures(self, assets: list[AssetState]) -> None:
         jobs = []
         for a in assets:
+            mesh_opts = self._mesh_opts(a)
+            for suffix, _ in a.level_sources:
+                imp = a.records["import" + suffix]
+                blob = imp["blobs"]["geometry"]
+                uvs = self._uv_sets(a, imp["meta"]) if not suffix else steps.uv_sets(
+                    imp["meta"]["materials"], imp["meta"]["meshMaterials"])
+                if suffix:  # levels of a hand-made list follow LOD0's UV decisions
+                    uvs = [u if l0 >= 0 else -1 for u, l0 in zip(uvs, a.uv_sets0)] if len(uvs) == len(a.uv_sets0) else uvs
+                else:
+                    a.uv_sets0 = uvs
+                kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs)}, mesh_opts)
+                jobs.append(([a], "mesh" + suffix, kin, (steps.task_mesh, str(self.store.root), blob, uvs, mesh_opts)))
             imp = a.records["import"]
-            blob = imp["blobs"]["geometry"]
-            uvs = steps.uv_sets(imp["meta"]["materials"], imp["meta"]["meshMaterials"])
-            kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs)}, self.mesh_opts)
-            jobs.append(([a], "mesh", kin, (steps.task_mesh, str(self.store.root), blob, uvs, self.mesh_opts)))
             images = imp["meta"]["images"]
             base = a.source.parent
+            tex_opts = self._tex_opts(a)
             for mi, mat in enumerate(imp["meta"]["materials"]):
                 for role, tex in mat["textures"].items():
                     image = dict(images[tex["image"]])
@@ -295,21 +360,53 @@ class Graph:
                     alpha = mat["alphaMode"] if role == "baseColor" else "OPAQUE"
                     cutoff = mat["alphaCutoff"] if alpha == "MASK" else 0.5
                     tin = {"image": image["digest"], "role": role, "alphaMode": alpha, "alphaCutoff": cutoff}
-                    kin = self._key_inputs("texture", tin, self.tex_opts)
+                    kin = self._key_inputs("texture", tin, tex_opts)
                     label = f"texture {image['name']} ({role})"
                     a.texture_jobs[(mi, role)] = label
                     jobs.append(([a], label, kin, (steps.task_texture, str(self.store.root), image, str(base),
-                                                   role, alpha, cutoff, self.tex_opts)))
+                                                   role, alpha, cutoff, tex_opts)))
         self._run_phase(jobs)
+        for a in assets:
+            if a.plan is None:
+                continue
+            cap = self._tex_opts(a).get("max_size")
+            for label in dict.fromkeys(a.texture_jobs.values()):
+                rec = a.records.get(label)
+                if rec is None or cap is None:
+                    continue
+                m = rec["meta"]
+                if max(m.get("sourceWidth", 0), m.get("sourceHeight", 0)) > max(m["width"], m["height"]):
+                    a.skipped.append(f"{a.plan.label}: {label}: mip levels above {m['width']}x{m['height']} not built "
+                                     f"(source {m['sourceWidth']}x{m['sourceHeight']}; capped at {cap} px by the "
+                                     "largest on-screen size or the scene's texture budget)")
 
     def _lod(self, assets: list[AssetState]) -> None:
         jobs = []
         for a in assets:
+            lod_opts, layout = self._lod_opts(a), self._layout(a)
+            if a.extra_sources:
+                blobs = [a.records["mesh" + suffix]["blobs"]["mesh"] for suffix, _ in a.level_sources]
+                kin = self._key_inputs("lod", {f"mesh{k}": b for k, b in enumerate(blobs)},
+                                       {"lod": lod_opts, "layout": layout, "handmade": True})
+                jobs.append(([a], "lod", kin, (steps.task_lod_handmade, str(self.store.root), blobs, lod_opts)))
+                continue
             blob = a.records["mesh"]["blobs"]["mesh"]
-            opts = {"lod": self.lod_opts, "layout": self.layout}
-            kin = self._key_inputs("lod", {"mesh": blob}, opts)
-            jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, self.layout, self.lod_opts)))
+            kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout})
+            jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, layout, lod_opts)))
         self._run_phase(jobs)
+
+    def _kept_levels(self, a: AssetState) -> list[list[int]] | None:
+        """Per mesh, the chain levels a scene can select (None: all of them)."""
+        if a.plan is None:
+            return None
+        radius = a.records["import"]["meta"].get("radius")
+        keep, reasons = [], []
+        for switches in a.records["lod"]["meta"]["switchDistances"]:
+            keep.append(a.plan.kept_levels(switches, radius))
+            reasons.extend(a.plan.level_reasons(switches, radius))
+        for r in dict.fromkeys(reasons):
+            a.skipped.append(r)
+        return keep
 
     def _materials(self, a: AssetState) -> tuple[list[dict], dict[str, str]]:
         """The encode step's material list, and the texture files (OUT path -> blob)."""
@@ -356,11 +453,13 @@ class Graph:
             a.outputs.update(tex_files)
             sources = self._sources(a)
             warnings = list(dict.fromkeys(list(a.records["import"]["meta"]["warnings"]) + a.warnings))
+            keep = self._kept_levels(a)
+            layout = self._layout(a)
             tin = {"lod": lod_blob, "materials": digest_json(materials), "sources": digest_json(sources),
                    "warnings": digest_json(warnings)}
-            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": self.layout})
-            jobs.append(([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, self.layout,
-                                              materials, sources, warnings)))
+            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": layout, "keep": keep})
+            jobs.append(([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, layout,
+                                              materials, sources, warnings, keep)))
         self._run_phase(jobs)
         for a in assets:
             rec = a.records.get("encode")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -10,13 +11,26 @@ from assetpipe.errors import ConfigError
 MODEL_SUFFIXES = (".gltf", ".glb", ".obj")
 
 
+def _walk(folder: Path) -> list[Path]:
+    """Model files under ``folder``, recursively, sorted (os.walk: one scandir per folder)."""
+    out = []
+    for dirpath, _dirs, files in os.walk(folder):
+        for name in files:
+            if os.path.splitext(name)[1].lower() in MODEL_SUFFIXES:
+                full = os.path.join(dirpath, name)
+                if os.path.isfile(full):
+                    out.append(full)
+    return [Path(f) for f in sorted(out, key=lambda f: Path(f).parts)]
+
+
 def discover_inputs(inputs: list[str | Path]) -> list[Path]:
-    """Model files named or found (recursively, sorted) under named folders; no duplicates."""
+    """Model files named or found (recursively, sorted) under named folders; no duplicates
+    (two names of one file, through ``..`` or the current folder, count once)."""
     found: list[Path] = []
     for raw in inputs:
         p = Path(raw)
         if p.is_dir():
-            found.extend(sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in MODEL_SUFFIXES))
+            found.extend(_walk(p))
         elif p.is_file():
             if p.suffix.lower() not in MODEL_SUFFIXES:
                 raise ConfigError(f"{p}: not a model file (expected {', '.join(MODEL_SUFFIXES)})")
@@ -25,7 +39,7 @@ def discover_inputs(inputs: list[str | Path]) -> list[Path]:
             raise ConfigError(f"{p}: no such file or folder")
     seen, out = set(), []
     for f in found:
-        key = f.resolve()
+        key = os.path.abspath(f)
         if key not in seen:
             seen.add(key)
             out.append(f)
@@ -43,15 +57,16 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
     suffix does: ``Box_gltf`` and ``Box_obj``.
     """
     # stems shared (case-insensitively) by several files of one folder take their suffix
+    parent = {p: Path(os.path.abspath(p)).parent for p in sources}
     by_folder: dict[tuple, int] = {}
     for p in sources:
-        k = (p.resolve().parent, p.stem.lower())
+        k = (parent[p], p.stem.lower())
         by_folder[k] = by_folder.get(k, 0) + 1
-    name = {p: f"{p.stem}_{p.suffix[1:]}" if by_folder[(p.resolve().parent, p.stem.lower())] > 1 else p.stem
+    name = {p: f"{p.stem}_{p.suffix[1:]}" if by_folder[(parent[p], p.stem.lower())] > 1 else p.stem
             for p in sources}
 
     def candidate(p: Path, depth: int) -> str:
-        parts = [*p.resolve().parent.parts[len(p.resolve().parent.parts) - depth:], name[p]] if depth else [name[p]]
+        parts = [*parent[p].parts[len(parent[p].parts) - depth:], name[p]] if depth else [name[p]]
         return _UNSAFE.sub("_", "_".join(parts)).strip("_") or "model"
 
     depth = {p: 0 for p in sources}
@@ -66,7 +81,7 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
         progressed = False
         for ps in dup:
             for p in ps:
-                if depth[p] < len(p.resolve().parent.parts):
+                if depth[p] < len(parent[p].parts):
                     depth[p] += 1
                     progressed = True
         if not progressed:  # names differing only in case, in one folder: number them, start over

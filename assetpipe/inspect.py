@@ -9,6 +9,7 @@ files that exist.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +45,8 @@ def check_model(model_json: Path) -> list[str]:
         if tp and not (base / tp).is_file():
             problems.append(f"material {m.get('id')}: texturePath {tp} does not exist")
         color = m.get("color", [])
-        if len(color) != 4 or not all(isinstance(c, (int, float)) for c in color):
-            problems.append(f"material {m.get('id')}: color is not 4 numbers")
+        if len(color) != 4 or not all(isinstance(c, (int, float)) and math.isfinite(c) for c in color):
+            problems.append(f"material {m.get('id')}: color is not 4 finite numbers")
     mat_ids = {m.get("id") for m in mats}
     try:
         idx = np.fromfile(base / model["idxFilename"], dtype="<u4")
@@ -76,21 +77,24 @@ def check_model(model_json: Path) -> list[str]:
             problems.append(f"mesh {mid}: vertex range {vo}+{vs} is invalid for {len(vtx_bytes)} bytes, stride {stride}")
             continue
         nverts = vs // stride
-        ranges = [(io, is_)]
+        ranges = [(io, is_, nverts)]
         if mid in side_meshes:
             lods = side_meshes[mid]["lods"]
             if not lods or (lods[0]["idxOffset"], lods[0]["idxSize"]) != (io, is_):
                 problems.append(f"mesh {mid}: sidecar lods[0] does not equal the seed index range")
-            ranges += [(l["idxOffset"], l["idxSize"]) for l in lods[1:]]
+            # a coarser level indexes the prefix of the vertex range its vertexCount names
+            ranges += [(l["idxOffset"], l["idxSize"], min(int(l.get("vertexCount", nverts)), nverts))
+                       for l in lods[1:]]
             if side_meshes[mid]["vertexCount"] != nverts:
                 problems.append(f"mesh {mid}: sidecar vertexCount {side_meshes[mid]['vertexCount']} != {nverts}")
-        for level, (o, s) in enumerate(ranges):
+        for level, (o, s, limit) in enumerate(ranges):
             if o % 4 or s % 12 or o + s > idx.size * 4 or s <= 0:
                 problems.append(f"mesh {mid} LOD{level}: index range {o}+{s} is invalid for {idx.size * 4} bytes")
                 continue
             part = idx[o // 4:(o + s) // 4]
-            if part.size and int(part.max()) >= nverts:
-                problems.append(f"mesh {mid} LOD{level}: index {int(part.max())} >= vertex count {nverts}")
+            if part.size and int(part.max()) >= limit:
+                what = "vertex count" if level == 0 else "its vertexCount prefix"
+                problems.append(f"mesh {mid} LOD{level}: index {int(part.max())} >= {what} {limit}")
     if side:
         for m in side.get("materials", []):
             for role, t in m.get("textures", {}).items():

@@ -36,8 +36,13 @@ class OutputState:
         data = _read_json(self.path)
         if data.get("version") != STATE_VERSION:
             data = {}
-        self.assets: dict[str, dict] = data.get("assets", {})
+        assets = data.get("assets", {})
+        # entries damaged by hand are dropped (their sources simply rebuild)
+        self.assets: dict[str, dict] = {k: e for k, e in (assets.items() if isinstance(assets, dict) else [])
+                                        if isinstance(e, dict) and isinstance(e.get("outputs"), dict)
+                                        and isinstance(e.get("inputs"), dict)}
         self._owned_at_load = {rel for e in self.assets.values() for rel in e.get("outputs", {})}
+        self.touched = False
 
     def load_explain(self) -> dict:
         data = _read_json(self.out_dir / STATE_DIR / "explain.json")
@@ -55,9 +60,15 @@ class OutputState:
     # -- the no-op check ----------------------------------------------------------------
     def check(self, source: Path, model_id: str, options_digest: str, stat_cache) -> str | None:
         """None when ``source``'s outputs are up to date; otherwise why not."""
-        entry = self.assets.get(str(source.resolve()))
+        return self.check_entry(os.path.abspath(source), model_id, options_digest, stat_cache)
+
+    def check_entry(self, key: str, model_id: str, options_digest: str, stat_cache) -> str | None:
+        """None when the outputs of state entry ``key`` are up to date; otherwise why not."""
+        entry = self.assets.get(key)
         if entry is None:
             return "new"
+        if not isinstance(entry.get("inputs"), dict) or not isinstance(entry.get("outputs"), dict):
+            return "state entry incomplete"
         if entry.get("options") != options_digest:
             return "options or versions changed"
         if entry.get("id") != model_id:
@@ -79,6 +90,7 @@ class OutputState:
             if st.st_size != size or digest_file(p) != digest:
                 return f"output modified: {rel}"
             entry["outputs"][rel] = [digest, st.st_size, st.st_mtime_ns]  # touched, same bytes
+            self.touched = True  # remember the new mtime, so the next no-op reads nothing
         return None
 
     # -- after a build ------------------------------------------------------------------
@@ -113,8 +125,12 @@ class OutputState:
 
     def forget_missing_sources(self) -> list[str]:
         """Drop the entries of sources that no longer exist (deleted or renamed); their ids."""
-        gone = [s for s in self.assets if not os.path.exists(s)]
-        return [self.assets.pop(s)["id"] for s in gone]
+        gone = [k for k, e in self.assets.items() if not os.path.exists(e.get("source", k))]
+        return [self.assets.pop(k)["id"] for k in gone]
+
+    def forget_entries(self, keys) -> None:
+        for k in keys:
+            self.assets.pop(k, None)
 
     def delete_unowned_outputs(self) -> list[str]:
         """Delete outputs the state owned when loaded and no entry owns now."""
@@ -132,7 +148,7 @@ class OutputState:
 def source_of(out_dir: Path, model_id: str) -> Path | None:
     """The source file the build in ``out_dir`` made ``model_id`` from (None if unknown)."""
     data = _read_json(Path(out_dir) / STATE_DIR / "state.json")
-    for source, entry in data.get("assets", {}).items():
+    for key, entry in data.get("assets", {}).items():
         if isinstance(entry, dict) and entry.get("id") == model_id:
-            return Path(source)
+            return Path(entry.get("source", key))
     return None

@@ -112,9 +112,15 @@ def task_import(store_root: str, source: str) -> dict:
             for d in model.dependencies if Path(d).resolve() not in image_paths]
     # geometry only: a material or texture edit leaves this blob, and the steps keyed on it, alone
     blobs["geometry"] = store.put_blob(pack({"meshes": meshes}, arrays))
+    if model.meshes:
+        pos = np.vstack([m.positions for m in model.meshes])
+        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        radius = float(np.sqrt(np.max(np.sum((pos - (lo + hi) / 2) ** 2, axis=1)))) if pos.size else 0.0
+    else:
+        radius = 0.0
     return {"blobs": blobs, "meta": {"deps": deps, "images": images, "materials": materials,
                                      "meshMaterials": [m.material for m in model.meshes],
-                                     "warnings": list(model.warnings)}}
+                                     "radius": radius, "warnings": list(model.warnings)}}
 
 
 def load_geometry(store: Store, digest: str):
@@ -153,7 +159,9 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
     meta, meshes = load_geometry(store, geometry_digest)
     out_meta, arrays = [], {}
     for i, mesh in enumerate(meshes):
-        pm = process_mesh(mesh, opts, uv_set=uv_set_per_mesh[i])
+        if uv_set_per_mesh[i] < 0:  # no material of the mesh samples a texture: UVs not computed
+            mesh = dataclasses.replace(mesh, uv0=None, uv1=None)
+        pm = process_mesh(mesh, opts, uv_set=max(uv_set_per_mesh[i], 0))
         arrays[f"{i}.vertices"] = pm.vertices
         arrays[f"{i}.indices"] = pm.indices
         out_meta.append({"name": pm.name, "material": pm.material, "degenerate": pm.degenerate_dropped,
@@ -204,7 +212,49 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
                                     "switchDistance": lv.switch_distance, "vertexCount": count})
         out_meta.append({**m, "lods": levels_meta})
     blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
-    return {"blobs": {"lod": blob}, "meta": {}}
+    return {"blobs": {"lod": blob},
+            "meta": {"switchDistances": [[lv["switchDistance"] for lv in m["lods"]] for m in out_meta]}}
+
+
+def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dict | None) -> dict:
+    """A hand-made LOD list: level k of mesh i is mesh i of the k-th file. Levels keep their own
+    vertices (appended after LOD0's in one vertex range per mesh); the error of every level is
+    measured against LOD0 like generated levels."""
+    from pipelines.lod import LodOptions
+    from pipelines.surface_error import measure_error
+
+    store = Store(Path(store_root))
+    opts = options_from_json(LodOptions, lod_options) or LodOptions()
+    levels = []
+    for d in mesh_digests:
+        data = store.get_blob(d)
+        if data is None:
+            raise FileNotFoundError(d)
+        levels.append(unpack(data))
+    ppu = opts.pixels_per_unit_at_unit_distance()
+    out_arrays, out_meta = {}, []
+    for i, m in enumerate(levels[0][0]["meshes"]):
+        verts0, idx0 = levels[0][1][f"{i}.vertices"], levels[0][1][f"{i}.indices"]
+        all_verts, levels_meta, running = [verts0], [], 0.0
+        out_arrays[f"{i}.lod0"] = idx0
+        levels_meta.append({"error": None, "switchDistance": 0.0, "vertexCount": int(verts0.shape[0])})
+        offset = verts0.shape[0]
+        for k, (meta_k, arrays_k) in enumerate(levels[1:], start=1):
+            vk, ik = arrays_k[f"{i}.vertices"], arrays_k[f"{i}.indices"]
+            e = measure_error(verts0[:, :3], idx0, vk[:, :3], ik, samples=opts.samples_for(idx0.shape[0]),
+                              seed=opts.error_seed)
+            running = max(running, e.hausdorff)
+            out_arrays[f"{i}.lod{k}"] = (ik.astype(np.int64) + offset).astype(np.uint32)
+            offset += vk.shape[0]
+            all_verts.append(vk)
+            levels_meta.append({"error": {"simplifier": None, "hausdorff": e.hausdorff, "rms": e.rms,
+                                          "hausdorffRel": e.hausdorff_rel, "rmsRel": e.rms_rel},
+                                "switchDistance": running * ppu, "vertexCount": int(offset), "handmade": True})
+        out_arrays[f"{i}.vertices"] = np.vstack(all_verts)
+        out_meta.append({**m, "lods": levels_meta})
+    blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
+    return {"blobs": {"lod": blob},
+            "meta": {"switchDistances": [[lv["switchDistance"] for lv in m["lods"]] for m in out_meta]}}
 
 
 # -- textures -------------------------------------------------------------------------------
@@ -236,15 +286,19 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
             "colorSpace": pt.color_space, "level0Ext": pt.level0_ext, "level0Shared": pt.level0_shared,
             "hasAlphaBelow255": pt.has_alpha_below_255, "meanDrift": list(pt.mean_drift),
             "coverage": list(pt.coverage) if pt.coverage is not None else None,
-            "sourceDigest": src.digest}
+            "sourceDigest": src.digest, "sourceWidth": pt.source_width, "sourceHeight": pt.source_height}
     return {"blobs": blobs, "meta": meta}
 
 
 # -- encode ---------------------------------------------------------------------------------
 
 def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[str],
-                materials: list[dict], sources: list[dict], warnings: list[str]) -> dict:
-    """Encode the output files of one model; each file becomes a blob."""
+                materials: list[dict], sources: list[dict], warnings: list[str],
+                keep: list[list[int]] | None = None) -> dict:
+    """Encode the output files of one model; each file becomes a blob.
+
+    ``keep[i]``: the levels of mesh i's chain to write (contiguous; its first becomes the
+    output LOD0, with the vertex prefix it uses); None keeps every level."""
     from assetpipe.format import OutputLod, OutputMaterial, OutputMesh, encode_model
     from pipelines.mesh_process import ATTRIBUTE_COMPONENTS
 
@@ -261,15 +315,20 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
         warnings.extend(m["warnings"])
         degenerate += m["degenerate"]
         welded += m["welded"]
-        lods = tuple(OutputLod(indices=arrays[f"{i}.lod{k}"], vertex_count=lv["vertexCount"],
-                               error=lv["error"] or {}, switch_distance=lv["switchDistance"])
-                     for k, lv in enumerate(m["lods"]))
+        kept = keep[i] if keep is not None else list(range(len(m["lods"])))
+        lods = tuple(OutputLod(indices=arrays[f"{i}.lod{k}"], vertex_count=m["lods"][k]["vertexCount"],
+                               error=m["lods"][k]["error"] or {}, switch_distance=m["lods"][k]["switchDistance"],
+                               chain_level=k)
+                     for k in kept)
+        vertices = arrays[f"{i}.vertices"]
+        if kept and kept[0] > 0 and not m["lods"][kept[0]].get("handmade"):
+            vertices = vertices[:lods[0].vertex_count]  # the prefix the kept levels use
         if lods[0].indices.shape[0] == 0:
             warnings.append(f"{m['name']}: no triangles left after dropping degenerate ones; mesh skipped")
             continue
         mat = m["material"] if 0 <= m["material"] < n_mats else n_mats - 1
         meshes.append(OutputMesh(id=m["name"], name=m["name"], material_id=f"{model_id}-mat-{mat}",
-                                 vertices=arrays[f"{i}.vertices"], lods=lods))
+                                 vertices=vertices, lods=lods))
     if not meshes:
         warnings.append("the model has no triangle geometry: its outputs hold no meshes")
     out_mats = [OutputMaterial(id=f"{model_id}-mat-{i}", name=m["name"], color=tuple(m["baseColorFactor"]),

@@ -5,7 +5,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 """
 
 IMPORT = 2  # 2: geometry-only blob
-MESH = 1
+MESH = 2  # 2: non-finite UVs cleaned before tangents are derived
 LOD = 2  # 2: meshopt SimplifySparse (unreferenced twins no longer lock vertices)
 TEXTURE = 1
 ENCODE = 1
@@ -15,15 +15,65 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
                  "format": FORMAT}
 
 
+_DISTS = ("numpy", "pygltflib", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
+          "point-cloud-utils", "fast-simplification")
+_cached: dict | None = None
+
+
+def _site_dirs() -> list[str]:
+    import site
+    import sys
+
+    dirs = [p for p in sys.path if p.endswith("site-packages")]
+    try:
+        dirs += site.getsitepackages()
+    except AttributeError:  # pragma: no cover - virtualenvs without it
+        pass
+    return sorted(set(dirs))
+
+
 def library_versions() -> dict:
-    """Versions of the libraries whose output the steps depend on (part of every key)."""
+    """Versions of the libraries whose output the steps depend on (part of every key).
+
+    Reading package metadata costs about 20 ms, so the answer is remembered per process and on
+    disk beside the cache, keyed by the modification times of the site-packages folders
+    (installing, upgrading or removing a package changes them)."""
+    global _cached
+    if _cached is not None:
+        return dict(_cached)
+    import json
+    import os
+
+    from cache.store import default_cache_dir
+
+    stamp = []
+    for d in _site_dirs():
+        try:
+            stamp.append([d, os.stat(d).st_mtime_ns])
+        except OSError:
+            pass
+    memo = default_cache_dir() / "library-versions.json"
+    try:
+        data = json.loads(memo.read_bytes())
+        if data.get("stamp") == stamp and set(data.get("versions", {})) == set(_DISTS):
+            _cached = data["versions"]
+            return dict(_cached)
+    except (OSError, ValueError, AttributeError):
+        pass
     from importlib.metadata import PackageNotFoundError, version
 
     out = {}
-    for dist in ("numpy", "pygltflib", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-                 "point-cloud-utils", "fast-simplification"):
+    for dist in _DISTS:
         try:
             out[dist] = version(dist)
         except PackageNotFoundError:
             out[dist] = None
-    return out
+    _cached = out
+    try:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        tmp = memo.with_name(f".{memo.name}.{os.getpid()}")
+        tmp.write_text(json.dumps({"stamp": stamp, "versions": out}))
+        os.replace(tmp, memo)
+    except OSError:
+        pass
+    return dict(out)

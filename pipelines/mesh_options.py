@@ -23,6 +23,8 @@ class MeshOptions:
 
     def __post_init__(self):
         unknown = [a for a in self.layout if a not in ATTRIBUTE_COMPONENTS]
+        if len(set(self.layout)) != len(self.layout):
+            raise ValueError(f"layout names an attribute twice: {self.layout}")
         if unknown or not self.layout or self.layout[0] != "position":
             raise ValueError(f"layout must start with 'position' and use {sorted(ATTRIBUTE_COMPONENTS)}; got {self.layout}")
 

@@ -325,8 +325,6 @@ def test_processing_is_deterministic_and_leaves_its_input_alone():
     np.testing.assert_array_equal(mesh.uv0, before[2])
 
 
-@pytest.mark.xfail(strict=True, reason="mesh_options: a layout naming an attribute twice (--layout "
-                                       "position,uv0,uv0) is accepted and written as two 'uv0' attributes")
 def test_layout_with_a_repeated_attribute_is_refused():
     with pytest.raises(ValueError):
         MeshOptions(layout=("position", "uv0", "uv0"))

@@ -270,9 +270,6 @@ def test_unreadable_state_is_empty(env, content):
     assert source_of(env.out, "x") is None
 
 
-@pytest.mark.xfail(strict=True, reason="state: a state.json of the right version with a damaged entry (no "
-                                       "'inputs'/'outputs') raises KeyError in check/delete_unowned_outputs "
-                                       "instead of being treated as unknown")
 def test_damaged_state_entry_is_rebuilt_not_a_crash(env):
     src = env.source("a.gltf")
     (env.out / STATE_DIR).mkdir(parents=True)
