@@ -15,7 +15,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
                  "format": FORMAT}
 
 
-_DISTS = ("numpy", "pygltflib", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
+_DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
           "point-cloud-utils", "fast-simplification")
 _cached: dict | None = None
 

@@ -53,7 +53,8 @@ def data_uri_mime(uri: str) -> str | None:
 class AccessorReader:
     """Reads a glTF document's accessors as numpy arrays.
 
-    ``gltf`` is a ``pygltflib.GLTF2``; ``glb_blob`` the binary chunk of a .glb (or None).
+    ``gltf`` is the document view (:mod:`pipelines.gltf_document`); ``glb_blob`` the binary
+    chunk of a .glb (or None).
     Files read (external buffers) are recorded in ``self.dependencies``.
     """
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import base64
 import struct
 from pathlib import Path
@@ -224,8 +226,10 @@ def test_external_bin_is_read_and_recorded(tmp_path):
 def test_percent_encoded_bin_name(tmp_path):
     b, acc, values = _one_accessor_builder()
     path = b.write_gltf(tmp_path / "m.gltf", bin_name="my data.bin")
+    doc = json.loads(path.read_text())
+    doc["buffers"][0]["uri"] = "my%20data.bin"
+    path.write_text(json.dumps(doc))
     gltf, blob = _parse(path)
-    gltf.buffers[0].uri = "my%20data.bin"
     np.testing.assert_array_equal(AccessorReader(gltf, path, blob).accessor(acc), values)
 
 
