@@ -23,8 +23,6 @@ parallel on a process pool when ``jobs > 1``. Results do not depend on ``jobs``.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -113,11 +111,17 @@ class Executor:
 
     def __init__(self, jobs: int):
         self.jobs = max(1, int(jobs))
-        self.pool = ProcessPoolExecutor(self.jobs) if self.jobs > 1 else None
+        self.pool = None
+        if self.jobs > 1:  # multiprocessing costs ~15 ms to import: only when asked for
+            from concurrent.futures import ProcessPoolExecutor
+
+            self.pool = ProcessPoolExecutor(self.jobs)
 
     def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
         if self.pool is None or len(calls) <= 1:
             return [steps.call_task(fn, *args) for fn, *args in calls]
+        from concurrent.futures.process import BrokenProcessPool
+
         futures = [self.pool.submit(steps.call_task, fn, *args) for fn, *args in calls]
         out = []
         for f in futures:
@@ -129,6 +133,8 @@ class Executor:
         return out
 
     def _restart(self):
+        from concurrent.futures import ProcessPoolExecutor
+
         try:
             self.pool.shutdown(wait=False, cancel_futures=True)
         except Exception:

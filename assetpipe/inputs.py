@@ -12,15 +12,23 @@ MODEL_SUFFIXES = (".gltf", ".glb", ".obj")
 
 
 def _walk(folder: Path) -> list[Path]:
-    """Model files under ``folder``, recursively, sorted (os.walk: one scandir per folder)."""
-    out = []
-    for dirpath, _dirs, files in os.walk(folder):
-        for name in files:
-            if os.path.splitext(name)[1].lower() in MODEL_SUFFIXES:
-                full = os.path.join(dirpath, name)
-                if os.path.isfile(full):
-                    out.append(full)
-    return [Path(f) for f in sorted(out, key=lambda f: Path(f).parts)]
+    """Model files under ``folder``, recursively, in sorted order. One scandir per folder and
+    no stat per file (the directory entry's type says whether it is a file)."""
+    out: list[str] = []
+    stack = [os.fspath(folder)]
+    while stack:
+        d = stack.pop()
+        try:
+            entries = list(os.scandir(d))
+        except OSError:
+            continue
+        for e in entries:
+            if e.is_dir():
+                stack.append(e.path)
+            elif os.path.splitext(e.name)[1].lower() in MODEL_SUFFIXES and e.is_file():
+                out.append(e.path)
+    out.sort(key=lambda f: f.split(os.sep))
+    return [Path(f) for f in out]
 
 
 def discover_inputs(inputs: list[str | Path]) -> list[Path]:

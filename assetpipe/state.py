@@ -75,12 +75,13 @@ class OutputState:
             return f"id changed ({entry.get('id')} -> {model_id})"
         for path, digest in entry["inputs"].items():
             try:
-                if stat_cache.digest(path) != digest:
+                if stat_cache.digest_abs(path) != digest:
                     return f"input changed: {os.path.basename(path)}"
             except FileNotFoundError:
                 return f"input missing: {os.path.basename(path)}"
+        prefix = os.path.join(os.fspath(self.out_dir), "")
         for rel, (digest, size, mtime_ns) in entry["outputs"].items():
-            p = self.out_dir / rel
+            p = prefix + rel
             try:
                 st = os.stat(p)
             except FileNotFoundError:

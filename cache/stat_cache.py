@@ -36,7 +36,10 @@ class StatCache:
 
     def digest(self, path: str | Path) -> str:
         """Content digest of ``path`` (raises FileNotFoundError when it is gone)."""
-        key = os.path.abspath(path)
+        return self.digest_abs(path if isinstance(path, str) and os.path.isabs(path) else os.path.abspath(path))
+
+    def digest_abs(self, key: str) -> str:
+        """:meth:`digest` of an absolute path given as a string (the no-op path's hot call)."""
         st = os.stat(key)
         e = self.entries.get(key)
         if e is not None and e[0] == st.st_size and e[1] == st.st_mtime_ns and e[2] == st.st_ino:
