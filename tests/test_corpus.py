@@ -40,3 +40,16 @@ def test_every_built_model_satisfies_the_seed_contract(corpus_build):
             assert m.indices.size and int(m.indices.max()) < m.positions.shape[0], (a["id"], m.id)
         r = CliRunner().invoke(main, ["inspect", str(out / f"{a['id']}.json")])
         assert r.exit_code == 0, r.output
+
+
+@pytest.mark.vulkan
+def test_every_built_corpus_model_validates_on_lavapipe(corpus_build):
+    """assetpipe validate with every check on (validation layer, silhouette, source, LODs, mips)."""
+    from renderer.validate import validate_batch
+
+    _, out, report = corpus_build
+    paths = [out / f"{a['id']}.json" for a in report["assets"]]
+    results = validate_batch(paths)
+    assert len(results) == len(paths)
+    failed = {r.model: r.failures() for r in results if not r.passed}
+    assert not failed, failed
