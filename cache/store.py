@@ -26,6 +26,8 @@ from assetpipe.errors import CacheError
 from assetpipe.hashing import PREFIX, canonical_json, digest_bytes
 
 ENV_VAR = "ASSETPIPE_CACHE"
+# folders this process has made sure exist (a Store is made per task: this saves a mkdir a write)
+_KNOWN_DIRS: set[Path] = set()
 
 
 def default_cache_dir() -> Path:
@@ -49,9 +51,13 @@ class Store:
     def __init__(self, root: Path):
         self.root = Path(root)
         self.dropped: list[str] = []  # entries found corrupt and deleted during this run
+        self._dirs = _KNOWN_DIRS
+        if self.root in _KNOWN_DIRS:
+            return
         try:
             for sub in ("objects", "actions", "tmp"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
+            _KNOWN_DIRS.add(self.root)
         except OSError as exc:
             raise CacheError(f"cannot use the cache folder {self.root}: {exc.strerror}") from None
 
@@ -70,18 +76,28 @@ class Store:
             raise CacheError(f"cannot read from the cache folder {self.root}: {exc.strerror}") from None
 
     def _write(self, path: Path, data: bytes) -> None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-            os.replace(tmp, path)
-        except OSError as exc:
+        for attempt in (0, 1):
+            tmp = None
             try:
-                os.unlink(tmp)
-            except (OSError, UnboundLocalError):
-                pass
-            raise CacheError(f"cannot write to the cache folder {self.root}: {exc.strerror}") from None
+                if attempt or path.parent not in _KNOWN_DIRS:  # one mkdir per shard and process
+                    (self.root / "tmp").mkdir(parents=True, exist_ok=True)
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    _KNOWN_DIRS.add(path.parent)
+                fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
+                with os.fdopen(fd, "wb") as f:
+                    f.write(data)
+                os.replace(tmp, path)
+                return
+            except OSError as exc:
+                if tmp is not None:
+                    try:
+                        os.unlink(tmp)
+                    except OSError:
+                        pass
+                if isinstance(exc, FileNotFoundError) and not attempt:
+                    _KNOWN_DIRS.discard(path.parent)  # a folder vanished under us: make it again
+                    continue
+                raise CacheError(f"cannot write to the cache folder {self.root}: {exc.strerror}") from None
 
     def _drop(self, path: Path, why: str) -> None:
         self.dropped.append(f"{path.relative_to(self.root)}: {why}")

@@ -190,3 +190,16 @@ def test_relative_xdg_cache_home_is_ignored(monkeypatch, tmp_path):
     monkeypatch.setenv("XDG_CACHE_HOME", "relative/cache")
     assert default_cache_dir() == tmp_path / "home" / ".cache" / "assetpipe"
     assert Path(default_cache_dir()).is_absolute()
+
+
+def test_a_cache_folder_deleted_while_the_process_runs_is_made_again(tmp_path):
+    import shutil
+
+    from cache.store import Store
+
+    s = Store(tmp_path / "c")
+    d1 = s.put_blob(b"one")
+    shutil.rmtree(tmp_path / "c")  # e.g. the user cleared the cache during a long build
+    s2 = Store(tmp_path / "c")  # the process remembers the folders it made: they must come back
+    d2 = s2.put_blob(b"two")
+    assert s2.get_blob(d2) == b"two" and s2.get_blob(d1) is None

@@ -62,10 +62,10 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     p = tmp_path / "M.json"
     p.write_bytes(b"old")
 
-    def bad_fsync(fd):
+    def bad_chmod(*args):  # fails between writing the temporary and renaming it
         raise OSError(5, "Input/output error")
 
-    monkeypatch.setattr(writer.os, "fsync", bad_fsync)
+    monkeypatch.setattr(writer.os, "chmod", bad_chmod)
     with pytest.raises(OSError):
         write_atomic(p, b"new")
     assert p.read_bytes() == b"old"
