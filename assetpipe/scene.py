@@ -580,13 +580,13 @@ class ModelPlan:
         fine = [k for k in range(len(switch_distances)) if k < kept[0]]
         empty = [k for k in range(kept[0], kept[-1] + 1) if k not in kept]
         if coarse:
-            out.append(f"{self.label}: LOD levels {_levels(coarse)} not built: they switch in beyond "
+            out.append(f"{self.label}: LOD level{_s(coarse)} {_levels(coarse)} not built: they switch in beyond "
                        f"{hi:.6g} model units, the farthest distance they are selected at ({self._far_why()})")
         if fine:
-            out.append(f"{self.label}: LOD levels {_levels(fine)} not built: finer than level {kept[0]}, "
+            out.append(f"{self.label}: LOD level{_s(fine)} {_levels(fine)} not built: finer than level {kept[0]}, "
                        f"which is selected at the nearest distance {lo:.6g} model units ({self._near_why()})")
         if empty:
-            out.append(f"{self.label}: LOD levels {_levels(empty)} not built: they switch in at the same "
+            out.append(f"{self.label}: LOD level{_s(empty)} {_levels(empty)} not built: they switch in at the same "
                        "distance as the next level, so they are never selected")
         return out
 
@@ -607,6 +607,10 @@ class ModelPlan:
             if u.max_screen_px is not None:
                 parts.append(f"at most {u.max_screen_px:g} px on screen in {u.where()}")
         return "; ".join(parts[:3]) + ("; ..." if len(parts) > 3 else "")
+
+
+def _s(ks: list[int]) -> str:
+    return "s" if len(ks) > 1 else ""
 
 
 def _levels(ks: list[int]) -> str:

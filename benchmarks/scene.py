@@ -72,9 +72,10 @@ def main() -> None:
         print(f"scene / folder: {s / f:.3f}x  ({counts})")
         print("what the scene build skipped:")
         for a in scene_report["assets"]:
+            if a["status"] == "skipped" or a["source"] == str(scene):  # the scene repeats its models'
+                continue
             for line in a.get("skipped", []):
-                if a["status"] != "skipped":
-                    print(f"  {line}")
+                print(f"  {line}")
         n_unref = sum(1 for a in scene_report["assets"] if a["status"] == "skipped")
         print(f"  {n_unref} model files: not built: no scene references them")
     finally:
