@@ -36,7 +36,7 @@ import numpy as np
 
 from pipelines import simplify as simp
 from pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
-from pipelines.surface_error import Reference, SurfaceError, measure_levels, prepare_reference
+from pipelines.surface_error import Reference, SurfaceError, local_frame, measure_levels, prepare_reference
 
 #: Bump when the output of this step changes for the same input and options (cache key).
 
@@ -84,14 +84,7 @@ class LodChain:
 
 def _normalised(positions: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     pos = np.asarray(positions, dtype=np.float64)
-    if indices.size:
-        used = np.zeros(pos.shape[0], dtype=bool)
-        used[indices.reshape(-1)] = True
-        lo, hi = pos[used].min(axis=0), pos[used].max(axis=0)
-    else:
-        lo = hi = np.zeros(3)
-    centre = (lo + hi) * 0.5
-    diag = float(np.linalg.norm(hi - lo))
+    centre, diag = local_frame(pos, indices)
     scale = diag if diag > 0 and math.isfinite(diag) else 1.0
     return (pos - centre) / scale, centre, diag
 

@@ -220,12 +220,7 @@ def prepare_reference(
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     tri = np.ascontiguousarray(np.asarray(indices).reshape(-1, 3), dtype=np.int64)
     used = _used_mask(tri, pos.shape[0])
-    if used.any():
-        lo, hi = pos[used].min(axis=0), pos[used].max(axis=0)
-    else:
-        lo = hi = np.zeros(3)
-    centre = (lo + hi) * 0.5
-    diag = float(np.linalg.norm(hi - lo))
+    centre, diag = local_frame(pos, tri)
     scale = diag if diag > 0 and math.isfinite(diag) else 1.0
     local = (pos - centre) / scale
     return Reference(
