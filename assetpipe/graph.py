@@ -63,7 +63,6 @@ class AssetState:
     plan: object = None  # a scene's ModelPlan: what the scenes need of this model (None: everything)
     extra_sources: tuple = ()  # a hand-made LOD list: the files of levels 1.. (level 0 is ``source``)
     skipped: list[str] = field(default_factory=list)  # what was not built, and why
-    uv_sets0: list = field(default_factory=list)
     key: str = ""  # its entry in the output state (and in explain.json)
 
     @property
@@ -181,9 +180,14 @@ class Graph:
         return {"step": step, "version": versions.STEP_VERSIONS[step], "inputs": inputs, "options": opts,
                 "libs": self.libs}
 
-    def _run_phase(self, jobs: list[tuple[list[AssetState], str, dict, tuple]]) -> dict[str, dict | None]:
+    def _run_phase(self, jobs: list[tuple[list[AssetState], str, dict, tuple]], accept=None,
+                   with_record=None) -> dict[str, dict | None]:
         """jobs: (assets, step label, key inputs, task call). Looks each key up, runs the
-        missing ones (each key once), stores records. Returns key -> record (None: failed)."""
+        missing ones (each key once), stores records. Returns key -> record (None: failed).
+
+        ``accept(call, record)``: whether a cached record is still valid (the import step's
+        discovered dependencies); ``with_record(key_inputs, record)``: the key inputs to
+        remember for explanations once the record is known."""
         results: dict[str, dict | None] = {}
         to_run: dict[str, tuple] = {}
         owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
@@ -191,13 +195,12 @@ class Graph:
             key = digest_json(kin)
             for a in assets:
                 owners.setdefault(key, []).append((a, label, kin))
-                a.key_inputs[label] = kin
             if key in results or key in to_run:
                 continue
             rec = self.store.get_record(key)
-            if rec is not None:
+            if rec is not None and (accept is None or accept(call, rec)):
                 results[key] = rec
-            else:
+            else:  # absent, or stale: run it and overwrite the record
                 to_run[key] = call
         keys = list(to_run)
         for key, (status, value, secs) in zip(keys, self.executor.map([to_run[k] for k in keys])):
@@ -219,11 +222,15 @@ class Graph:
                         a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
                         a.internal = str(value)
         for key, owner_list in owners.items():
+            rec = results.get(key)
             for a, label, kin in owner_list:
+                if with_record is not None and rec is not None:
+                    kin = with_record(kin, rec)
+                a.key_inputs[label] = kin
                 ran = key in to_run
                 prev = self.previous.get(a.key, {}).get(label)
                 a.runs.append(StepRun(label, ran, explain(prev, kin) if ran else None))
-                a.records[label] = results.get(key)
+                a.records[label] = rec
         return results
 
     # -- the phases ---------------------------------------------------------------------
@@ -251,17 +258,9 @@ class Graph:
                     break
                 a.inputs[str(src.resolve())] = src_digest
                 kin = self._key_inputs("import", {"source": src_digest}, None)
-                rec = self.store.get_record(digest_json(kin))
-                if rec is not None and not self._deps_match(src, rec):
-                    rec = None
-                if rec is not None:
-                    a.key_inputs[label] = _with_deps(kin, rec)
-                    a.records[label] = rec
-                    a.runs.append(StepRun(label, False))
-                    continue
                 jobs.append(([a], label, kin, (steps.task_import, str(self.store.root), str(src))))
-        if jobs:  # a record under the same key may exist but be stale (a .bin changed): overwrite
-            self._run_uncached(jobs)
+        # a record is valid only while the files the import read (.bin, .mtl) are unchanged
+        self._run_phase(jobs, accept=lambda call, rec: self._deps_match(Path(call[2]), rec), with_record=_with_deps)
         for a in assets:
             for suffix, src in a.level_sources:
                 rec = a.records.get("import" + suffix)
@@ -285,31 +284,6 @@ class Graph:
             except (FileNotFoundError, NotADirectoryError):
                 return False
         return True
-
-    def _run_uncached(self, jobs) -> dict:
-        """Like _run_phase but never looks the key up (the caller already decided to run)."""
-        results = {}
-        keys = [digest_json(kin) for _, _, kin, _ in jobs]
-        outs = self.executor.map([call for _, _, _, call in jobs])
-        for key, (assets, label, kin, _), (status, value, secs) in zip(keys, jobs, outs):
-            if status == "ok":
-                kin = _with_deps(kin, value)
-            for a in assets:
-                a.seconds += secs
-                a.key_inputs[label] = kin
-                prev = self.previous.get(a.key, {}).get(label)
-                a.runs.append(StepRun(label, True, explain(prev, kin)))
-                if status == "ok":
-                    a.records[label] = value
-                elif status == "asset":
-                    a.error = str(value)
-                else:
-                    a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
-                    a.internal = str(value)
-            if status == "ok":
-                self.store.put_record(key, value)
-                results[key] = value
-        return results
 
     def _uv_sets(self, a: AssetState, meta: dict) -> list[int]:
         """UV set per mesh for the uv0 slot; -1 when a scene build needs no UVs for the mesh."""
@@ -337,15 +311,16 @@ class Graph:
         jobs = []
         for a in assets:
             mesh_opts = self._mesh_opts(a)
+            lod0_uvs: list[int] = []
             for suffix, _ in a.level_sources:
                 imp = a.records["import" + suffix]
                 blob = imp["blobs"]["geometry"]
-                uvs = self._uv_sets(a, imp["meta"]) if not suffix else steps.uv_sets(
-                    imp["meta"]["materials"], imp["meta"]["meshMaterials"])
-                if suffix:  # levels of a hand-made list follow LOD0's UV decisions
-                    uvs = [u if l0 >= 0 else -1 for u, l0 in zip(uvs, a.uv_sets0)] if len(uvs) == len(a.uv_sets0) else uvs
-                else:
-                    a.uv_sets0 = uvs
+                if not suffix:
+                    uvs = lod0_uvs = self._uv_sets(a, imp["meta"])
+                else:  # levels of a hand-made list follow LOD0's decisions (same materials)
+                    uvs = steps.uv_sets(imp["meta"]["materials"], imp["meta"]["meshMaterials"])
+                    if len(uvs) == len(lod0_uvs):
+                        uvs = [u if u0 >= 0 else -1 for u, u0 in zip(uvs, lod0_uvs)]
                 kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs)}, mesh_opts)
                 jobs.append(([a], "mesh" + suffix, kin, (steps.task_mesh, str(self.store.root), blob, uvs, mesh_opts)))
             imp = a.records["import"]

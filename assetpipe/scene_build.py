@@ -150,6 +150,7 @@ class SceneRun:
         """Build the objects' own textures (cached like every texture step)."""
         from assetpipe import steps, versions
         from assetpipe.graph import TEXTURE_DIR
+        from pipelines.image_source import sniff_mime
 
         textures, files, inputs = {}, {}, {}
         radii = {}
@@ -167,8 +168,12 @@ class SceneRun:
             tex_opts = steps.options_to_json(dataclasses.replace(self.options.texture, max_size=size))
             digest = stat.digest(ob.texture)
             inputs[str(ob.texture.resolve())] = digest
-            image = {"name": ob.texture.name, "mime": "image/png" if ob.texture.suffix.lower() == ".png" else "image/jpeg",
-                     "digest": digest, "path": ob.texture.name}
+            with open(ob.texture, "rb") as f:  # the type from the bytes, as for model images
+                mime = sniff_mime(f.read(16)) or ("image/x-tga" if ob.texture.suffix.lower() == ".tga" else None)
+            if mime is None:
+                raise SceneError(sc.path, f"object {ob.index}: texture {ob.texture.name} is not a PNG, JPEG, BMP, "
+                                          "GIF, WebP or TGA image")
+            image = {"name": ob.texture.name, "mime": mime, "digest": digest, "path": ob.texture.name}
             kin = {"step": "texture", "version": versions.STEP_VERSIONS["texture"],
                    "inputs": {"image": digest, "role": "baseColor", "alphaMode": "OPAQUE", "alphaCutoff": 0.5},
                    "options": tex_opts, "libs": versions.library_versions()}
