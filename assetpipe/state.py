@@ -21,6 +21,23 @@ from assetpipe.writer import STATE_DIR, tmp_dir, write_atomic
 STATE_VERSION = 1
 
 
+def confined_rel(rel) -> bool:
+    """True when ``rel`` (read from a state file) names a path inside the output folder.
+
+    A state file can come from elsewhere (an output folder restored from CI artifacts, or
+    shared), so every output path in it is checked before it is stat'ed, written or deleted:
+    a relative POSIX path of plain parts: no ``..``, ``.`` or empty part, no root, no NUL."""
+    if not isinstance(rel, str) or not rel or "\0" in rel or os.path.isabs(rel):
+        return False
+    parts = rel.split("/")
+    return all(part not in ("", ".", "..") for part in parts)
+
+
+def _entry_ok(entry) -> bool:
+    return (isinstance(entry, dict) and isinstance(entry.get("outputs"), dict)
+            and isinstance(entry.get("inputs"), dict) and all(confined_rel(rel) for rel in entry["outputs"]))
+
+
 def _read_json(path: Path) -> dict:
     try:
         data = json.loads(path.read_bytes())
@@ -37,10 +54,10 @@ class OutputState:
         if data.get("version") != STATE_VERSION:
             data = {}
         assets = data.get("assets", {})
-        # entries damaged by hand are dropped (their sources simply rebuild)
+        # entries damaged by hand, or naming an output outside OUT, are dropped (their sources
+        # simply rebuild, and nothing outside OUT is ever stat'ed, written or deleted for them)
         self.assets: dict[str, dict] = {k: e for k, e in (assets.items() if isinstance(assets, dict) else [])
-                                        if isinstance(e, dict) and isinstance(e.get("outputs"), dict)
-                                        and isinstance(e.get("inputs"), dict)}
+                                        if _entry_ok(e)}
         self._owned_at_load = {rel for e in self.assets.values() for rel in e.get("outputs", {})}
         self.touched = False
 
@@ -137,9 +154,14 @@ class OutputState:
         """Delete outputs the state owned when loaded and no entry owns now."""
         owned = {rel for e in self.assets.values() for rel in e["outputs"]}
         removed = []
+        root = os.path.realpath(self.out_dir)
         for rel in sorted(self._owned_at_load - owned):
+            p = self.out_dir / rel
+            # a link inside OUT must not carry a deletion outside it either
+            if os.path.commonpath([root, os.path.realpath(p.parent)]) != root:
+                continue
             try:
-                (self.out_dir / rel).unlink()
+                p.unlink()
                 removed.append(rel)
             except FileNotFoundError:
                 pass

@@ -278,3 +278,44 @@ def test_damaged_state_entry_is_rebuilt_not_a_crash(env):
     state = OutputState(env.out)
     assert _check(state, src) is not None
     assert state.delete_unowned_outputs() == []
+
+
+# -- confinement: a crafted or restored state file never reaches outside OUT ----------------------
+
+@pytest.mark.parametrize("rel", ["../victim.txt", "ABSOLUTE", "textures/../../victim.txt", "./A.json",
+                                 "a//b", "", "a\0b"])
+def test_state_naming_an_output_outside_out_is_dropped_and_nothing_outside_is_deleted(env, rel):
+    victim = env.root / "victim.txt"
+    victim.write_bytes(b"precious")
+    src = env.source("a.gltf")
+    if rel == "ABSOLUTE":
+        rel = str(victim)
+    (env.out / STATE_DIR).mkdir(parents=True)
+    entry = {"id": "A", "options": "opt", "inputs": {str(src.resolve()): digest_file(src)},
+             "outputs": {rel: [digest_bytes(b"x"), 1, 1], "A.json": [digest_bytes(b"y"), 1, 1]}}
+    (env.out / STATE_DIR / "state.json").write_text(json.dumps({"version": 1, "assets": {str(src.resolve()): entry}}))
+    state = OutputState(env.out)
+    assert state.assets == {}  # the whole entry is distrusted: its source rebuilds
+    assert _check(state, src) == "new"
+    src.unlink()
+    state.forget_missing_sources()
+    assert state.delete_unowned_outputs() == []
+    assert victim.read_bytes() == b"precious"
+
+
+def test_stale_output_behind_a_link_out_of_out_is_not_deleted(env):
+    outside = env.root / "elsewhere"
+    outside.mkdir()
+    (outside / "A.json").write_bytes(b"precious")
+    src = env.source("a.gltf")
+    state = OutputState(env.out)
+    env.build(state, src, "A", {"sub/A.json": b"json"})
+    state.save(None)
+    (env.out / "sub" / "A.json").unlink()
+    (env.out / "sub").rmdir()
+    (env.out / "sub").symlink_to(outside)  # OUT/sub now leads outside OUT
+    src.unlink()
+    state = OutputState(env.out)
+    assert state.forget_missing_sources() == ["A"]
+    assert state.delete_unowned_outputs() == []
+    assert (outside / "A.json").read_bytes() == b"precious"
