@@ -11,100 +11,18 @@ The no-op path (every asset up to date) imports neither numpy nor any importer.
 
 from __future__ import annotations
 
-import json
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from assetpipe import __version__, versions
-from assetpipe.hashing import digest_json
+from assetpipe.build_types import AssetResult, AssetSpec, BuildReport, options_digest  # noqa: F401 (public)
 from assetpipe.inputs import assign_ids, discover_inputs
-
-
-@dataclass
-class AssetResult:
-    """One input's outcome, as the ``--json`` report writes it."""
-
-    source: str
-    id: str
-    status: str  # "built" | "cached" | "failed" | "skipped" (a scene build: not referenced)
-    outputs: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    error: str | None = None
-    seconds: float = 0.0
-    reason: str | None = None
-    steps: list[dict] = field(default_factory=list)
-    stats: dict = field(default_factory=dict)
-    traceback: str | None = None
-    skipped: list[str] = field(default_factory=list)  # what was not built for it, and why
-
-    def to_json(self) -> dict:
-        d = {"source": self.source, "id": self.id, "status": self.status, "outputs": self.outputs,
-             "warnings": self.warnings, "error": self.error, "seconds": round(self.seconds, 4),
-             "reason": self.reason}
-        if self.steps:
-            d["steps"] = self.steps
-        if self.stats:
-            d["stats"] = self.stats
-        if self.skipped:
-            d["skipped"] = self.skipped
-        if self.traceback:
-            d["traceback"] = self.traceback
-        return d
-
-
-@dataclass
-class BuildReport:
-    results: list[AssetResult]
-    seconds: float
-    removed: list[str] = field(default_factory=list)
-    cache_dropped: list[str] = field(default_factory=list)
-
-    @property
-    def failed(self) -> list[AssetResult]:
-        return [r for r in self.results if r.status == "failed"]
-
-    def counts(self) -> dict[str, int]:
-        counts: dict[str, int] = {}
-        for r in self.results:
-            counts[r.status] = counts.get(r.status, 0) + 1
-        return counts
-
-    def to_json(self) -> dict:
-        return {"assets": [r.to_json() for r in self.results], "counts": self.counts(),
-                "removed": self.removed, "cacheDropped": self.cache_dropped, "seconds": round(self.seconds, 4)}
-
-    def write_json(self, path: Path) -> None:
-        from assetpipe.writer import write_atomic
-
-        write_atomic(Path(path), (json.dumps(self.to_json(), indent=2) + "\n").encode())
-
-
-def options_digest(options_json: dict) -> str:
-    return digest_json({"assetpipe": __version__, "steps": versions.STEP_VERSIONS,
-                        "libs": versions.library_versions(), "options": options_json})
 
 
 def _outputs_list(out_dir: Path, model_id: str) -> list[str]:
     base = os.path.join(out_dir, model_id)
     return [f"{base}.json", f"{base}-mat.json", f"{base}.asset.json"]
-
-
-@dataclass
-class AssetSpec:
-    """One model to build: its source (LOD0 file), id, options, and for scene builds the
-    scene's plan for it. ``key`` names its entry in the output state."""
-
-    source: Path
-    id: str
-    options: object
-    options_digest: str
-    key: str
-    plan: object = None
-    extra_sources: tuple = ()
-    scenes: tuple = ()  # the scene files that asked for it
 
 
 def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1,
@@ -115,10 +33,10 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     With scene files, only what the scenes reference is built (the other inputs are candidates,
     reported as skipped), each model with what its scenes need; ``OUT/<scene>.scene.json`` is
     written per scene."""
-    from cache.stat_cache import StatCache
-    from cache.store import Store, default_cache_dir
+    from assetpipe.cache.stat_cache import StatCache
+    from assetpipe.cache.store import Store, default_cache_dir
     from assetpipe.state import OutputState
-    from assetpipe.writer import sweep_tmp
+    from assetpipe.core.writer import sweep_tmp
 
     t0 = time.perf_counter()
     scene_paths = [Path(p) for p in inputs if Path(p).suffix.lower() == ".json"]

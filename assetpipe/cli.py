@@ -8,9 +8,9 @@ from pathlib import Path
 import click
 
 from assetpipe import __version__
-from assetpipe.errors import AssetpipeError
+from assetpipe.core.errors import AssetpipeError
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
-from pipelines.lod_options import SIMPLIFIERS
+from assetpipe.pipelines.lod_options import SIMPLIFIERS
 
 _D = DEFAULT_BUILD_OPTIONS
 
@@ -111,7 +111,7 @@ def inspect(model_json: Path) -> None:
 
 
 def _register_renderer_commands() -> None:
-    from renderer.cli_commands import preview, validate  # light: vulkan is imported when they run
+    from assetpipe.renderer.cli_commands import preview, validate  # light: vulkan is imported when they run
 
     main.add_command(validate)
     main.add_command(preview)

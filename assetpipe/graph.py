@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from assetpipe import steps, versions
-from assetpipe.hashing import digest_json
-from cache.stat_cache import StatCache
-from cache.store import Store
+from assetpipe.core.hashing import digest_json
+from assetpipe.cache.stat_cache import StatCache
+from assetpipe.cache.store import Store
 
 TEXTURE_DIR = "textures"
 

@@ -6,7 +6,7 @@ import os
 import re
 from pathlib import Path
 
-from assetpipe.errors import ConfigError
+from assetpipe.core.errors import ConfigError
 
 MODEL_SUFFIXES = (".gltf", ".glb", ".obj")
 

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from assetpipe.errors import AssetError
-from pipelines.model import ImportedModel
+from assetpipe.core.errors import AssetError
+from assetpipe.pipelines.model import ImportedModel
 
 
 def import_model(source: Path) -> ImportedModel:
     suffix = source.suffix.lower()
     if suffix in (".gltf", ".glb"):
-        from pipelines.import_gltf import import_gltf
+        from assetpipe.pipelines.import_gltf import import_gltf
         return import_gltf(source)
     if suffix == ".obj":
-        from pipelines.import_obj import import_obj
+        from assetpipe.pipelines.import_obj import import_obj
         return import_obj(source)
     raise AssetError(source, f"unsupported file type {suffix!r}")

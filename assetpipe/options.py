@@ -8,9 +8,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
-from pipelines.mesh_options import DEFAULT_MESH_OPTIONS, MeshOptions
-from pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
+from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
+from assetpipe.pipelines.mesh_options import DEFAULT_MESH_OPTIONS, MeshOptions
+from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
 
 
 @dataclass(frozen=True)

@@ -32,10 +32,10 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from assetpipe.errors import SceneError
-from pipelines.lod_options import LodOptions
-from pipelines.mesh_options import SEED_LAYOUT
-from pipelines.texture_options import TextureOptions
+from assetpipe.core.errors import SceneError
+from assetpipe.pipelines.lod_options import LodOptions
+from assetpipe.pipelines.mesh_options import SEED_LAYOUT
+from assetpipe.pipelines.texture_options import TextureOptions
 
 SCENE_FORMAT_VERSION = 1
 MODEL_EXTENSIONS = (".gltf", ".glb", ".obj")

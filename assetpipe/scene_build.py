@@ -12,9 +12,9 @@ import json
 import math
 from pathlib import Path
 
-from assetpipe.build import AssetResult, AssetSpec, options_digest
-from assetpipe.errors import SceneError
-from assetpipe.hashing import digest_json
+from assetpipe.build_types import AssetResult, AssetSpec, options_digest
+from assetpipe.core.errors import SceneError
+from assetpipe.core.hashing import digest_json
 from assetpipe.inputs import assign_ids
 
 
@@ -150,7 +150,7 @@ class SceneRun:
         """Build the objects' own textures (cached like every texture step)."""
         from assetpipe import steps, versions
         from assetpipe.graph import TEXTURE_DIR
-        from pipelines.image_source import sniff_mime
+        from assetpipe.pipelines.image_source import sniff_mime
 
         textures, files, inputs = {}, {}, {}
         radii = {}

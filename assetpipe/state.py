@@ -15,8 +15,10 @@ import json
 import os
 from pathlib import Path
 
-from assetpipe.hashing import digest_file
-from assetpipe.writer import STATE_DIR, tmp_dir, write_atomic
+from assetpipe.core.hashing import digest_file
+from assetpipe.core.state_file import read_json_dict as _read_json
+from assetpipe.core.state_file import source_of  # noqa: F401 (re-exported)
+from assetpipe.core.writer import STATE_DIR, tmp_dir, write_atomic
 
 STATE_VERSION = 1
 
@@ -36,14 +38,6 @@ def confined_rel(rel) -> bool:
 def _entry_ok(entry) -> bool:
     return (isinstance(entry, dict) and isinstance(entry.get("outputs"), dict)
             and isinstance(entry.get("inputs"), dict) and all(confined_rel(rel) for rel in entry["outputs"]))
-
-
-def _read_json(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_bytes())
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError):
-        return {}
 
 
 class OutputState:
@@ -166,12 +160,3 @@ class OutputState:
             except FileNotFoundError:
                 pass
         return removed
-
-
-def source_of(out_dir: Path, model_id: str) -> Path | None:
-    """The source file the build in ``out_dir`` made ``model_id`` from (None if unknown)."""
-    data = _read_json(Path(out_dir) / STATE_DIR / "state.json")
-    for key, entry in data.get("assets", {}).items():
-        if isinstance(entry, dict) and entry.get("id") == model_id:
-            return Path(entry.get("source", key))
-    return None

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from assetpipe import __version__
-from assetpipe.errors import AssetError
-from cache.serialize import pack, unpack
-from cache.store import Store
+from assetpipe.core.errors import AssetError
+from assetpipe.cache.serialize import pack, unpack
+from assetpipe.cache.store import Store
 
 def call_task(fn, *args) -> tuple[str, object, float]:
     """Run a task: (status, value, seconds) with status "ok" (value: the record), "asset"
@@ -65,7 +65,7 @@ def _relative(path: Path, base: Path) -> str:
 
 def task_import(store_root: str, source: str) -> dict:
     """Import a model file; store its geometry and materials (and embedded images)."""
-    from assetpipe.hashing import digest_file
+    from assetpipe.core.hashing import digest_file
     from assetpipe.model_import import import_model
 
     store = Store(Path(store_root))
@@ -125,7 +125,7 @@ def task_import(store_root: str, source: str) -> dict:
 
 def load_geometry(store: Store, digest: str):
     """(meta, list of MeshData) from an import step's geometry blob."""
-    from pipelines.model import MeshData
+    from assetpipe.pipelines.model import MeshData
 
     data = store.get_blob(digest)
     if data is None:
@@ -152,7 +152,7 @@ def uv_sets(materials: list[dict], mesh_materials: list[int]) -> list[int]:
 
 
 def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int], mesh_options: dict) -> dict:
-    from pipelines.mesh_process import MeshOptions, process_mesh
+    from assetpipe.pipelines.mesh_process import MeshOptions, process_mesh
 
     store = Store(Path(store_root))
     opts = options_from_json(MeshOptions, mesh_options)
@@ -174,8 +174,8 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
 
 def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None) -> dict:
     """LOD chain per mesh, vertices reordered so that coarser levels use a prefix."""
-    from pipelines.lod import LodOptions, build_lod_chain, reorder_for_lod_prefix
-    from pipelines.mesh_process import ATTRIBUTE_COMPONENTS
+    from assetpipe.pipelines.lod import LodOptions, build_lod_chain, reorder_for_lod_prefix
+    from assetpipe.pipelines.mesh_process import ATTRIBUTE_COMPONENTS
 
     store = Store(Path(store_root))
     data = store.get_blob(mesh_digest)
@@ -220,8 +220,8 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
     """A hand-made LOD list: level k of mesh i is mesh i of the k-th file. Levels keep their own
     vertices (appended after LOD0's in one vertex range per mesh); the error of every level is
     measured against LOD0 like generated levels."""
-    from pipelines.lod import LodOptions
-    from pipelines.surface_error import measure_error
+    from assetpipe.pipelines.lod import LodOptions
+    from assetpipe.pipelines.surface_error import measure_error
 
     store = Store(Path(store_root))
     opts = options_from_json(LodOptions, lod_options) or LodOptions()
@@ -261,11 +261,11 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
 
 def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_mode: str,
                  alpha_cutoff: float, texture_options: dict) -> dict:
-    from assetpipe.errors import MissingFileError
-    from assetpipe.hashing import digest_bytes
-    from pipelines.model import ImageSource
-    from pipelines.texture_options import TextureOptions
-    from pipelines.texture_process import process_texture
+    from assetpipe.core.errors import MissingFileError
+    from assetpipe.core.hashing import digest_bytes
+    from assetpipe.pipelines.model import ImageSource
+    from assetpipe.pipelines.texture_options import TextureOptions
+    from assetpipe.pipelines.texture_process import process_texture
 
     store = Store(Path(store_root))
     if image["path"] is not None:
@@ -300,7 +300,7 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
     ``keep[i]``: the levels of mesh i's chain to write (contiguous; its first becomes the
     output LOD0, with the vertex prefix it uses); None keeps every level."""
     from assetpipe.format import OutputLod, OutputMaterial, OutputMesh, encode_model
-    from pipelines.mesh_process import ATTRIBUTE_COMPONENTS
+    from assetpipe.pipelines.mesh_process import ATTRIBUTE_COMPONENTS
 
     store = Store(Path(store_root))
     data = store.get_blob(lod_digest)

@@ -44,7 +44,7 @@ def library_versions() -> dict:
     import json
     import os
 
-    from cache.store import default_cache_dir
+    from assetpipe.cache.store import default_cache_dir
 
     stamp = []
     for d in _site_dirs():

@@ -10,7 +10,7 @@ Every compared pair is interleaved in one run and reported as a ratio of medians
 
 1. Cold corpus build, hashing share (issue 3). ``run_build`` on the whole corpus with the
    default options (LODs on; ``--quick``: ``--no-lod``) and ``jobs=1``, in this process, with
-   timing wrappers on ``assetpipe.hashing.digest_file`` / ``digest_bytes`` (at every module
+   timing wrappers on ``assetpipe.core.hashing.digest_file`` / ``digest_bytes`` (at every module
    that imported them by name: hashing, state, stat_cache, store, image_source) and on
    ``cache.stat_cache.StatCache.digest`` (a wrapper inside a wrapper counts once). Hashing
    time here includes reading the file for ``digest_file`` and the stat calls of the stat
@@ -235,11 +235,11 @@ class HashMeter:
         setattr(owner, name, value)
 
     def install(self):
-        import assetpipe.hashing as hashing
+        import assetpipe.core.hashing as hashing
         import assetpipe.state as state
-        import cache.stat_cache as stat_cache
-        import cache.store as store
-        import pipelines.image_source as image_source
+        import assetpipe.cache.stat_cache as stat_cache
+        import assetpipe.cache.store as store
+        import assetpipe.pipelines.image_source as image_source
 
         raw_file, raw_bytes = hashing.digest_file, hashing.digest_bytes
         size_file = lambda p, *a: os.path.getsize(p)  # noqa: E731

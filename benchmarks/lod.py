@@ -50,10 +50,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pipelines import simplify as simp  # noqa: E402
-from pipelines.lod import (  # noqa: E402
+from assetpipe.pipelines import simplify as simp  # noqa: E402
+from assetpipe.pipelines.lod import (  # noqa: E402
     DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain, weld_for_simplification)
-from pipelines.surface_error import (  # noqa: E402
+from assetpipe.pipelines.surface_error import (  # noqa: E402
     ZERO_ERROR as ZERO, measure_against, measure_levels, prepare_reference)
 
 GLTFPACK_LOCAL = REPO / ".venv" / "node" / "node_modules" / ".bin" / "gltfpack"
@@ -170,8 +170,8 @@ def load_build_meshes(path: Path):
     """The file as the build's LOD step sees it: one (positions f64, indices u32, uv f32|None)
     per mesh, after import and mesh processing with the default options (assetpipe.steps)."""
     from assetpipe.model_import import import_model
-    from pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS
-    from pipelines.mesh_process import process_mesh
+    from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS
+    from assetpipe.pipelines.mesh_process import process_mesh
 
     layout = DEFAULT_MESH_OPTIONS.layout
     cols, c = {}, 0

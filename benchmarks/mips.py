@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import cv2  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from pipelines.texture_mips import build_mip_chain, linear_to_srgb, mip_sizes, srgb_to_linear  # noqa: E402
+from assetpipe.pipelines.texture_mips import build_mip_chain, linear_to_srgb, mip_sizes, srgb_to_linear  # noqa: E402
 
 
 def make_image(size: int, seed: int = 1234) -> np.ndarray:

@@ -25,8 +25,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from renderer.cli_commands import find_built_models  # noqa: E402
-from renderer.validate import ValidateOptions, validate_batch  # noqa: E402
+from assetpipe.renderer.cli_commands import find_built_models  # noqa: E402
+from assetpipe.renderer.batch import validate_batch  # noqa: E402
+from assetpipe.renderer.validate import ValidateOptions  # noqa: E402
 
 CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", REPO.parent / "shared" / "corpus")) / "models"
 

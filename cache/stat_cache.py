@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from assetpipe.hashing import digest_file
+from assetpipe.core.hashing import digest_file
 
 RACY_NS = 2_000_000_000
 VERSION = 1

@@ -22,8 +22,8 @@ import os
 import tempfile
 from pathlib import Path
 
-from assetpipe.errors import CacheError
-from assetpipe.hashing import PREFIX, canonical_json, digest_bytes
+from assetpipe.core.errors import CacheError
+from assetpipe.core.hashing import PREFIX, canonical_json, digest_bytes
 
 ENV_VAR = "ASSETPIPE_CACHE"
 # folders this process has made sure exist (a Store is made per task: this saves a mkdir a write)

@@ -14,8 +14,8 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from assetpipe.errors import AssetError, MissingFileError, UnsupportedError
-from pipelines.image_source import resolve_inside
+from assetpipe.core.errors import AssetError, MissingFileError, UnsupportedError
+from assetpipe.pipelines.image_source import resolve_inside
 
 COMPONENT_DTYPES = {
     5120: np.dtype(np.int8),

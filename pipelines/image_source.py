@@ -10,9 +10,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from assetpipe.errors import AssetError, InvalidTextureError, MissingFileError
-from assetpipe.hashing import digest_bytes
-from pipelines.model import ImageSource
+from assetpipe.core.errors import AssetError, InvalidTextureError, MissingFileError
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.pipelines.model import ImageSource
 
 # A 16384^2 RGBA PNG can be far smaller than this; anything larger is refused, not read.
 MAX_IMAGE_FILE_BYTES = 256 * 1024 * 1024

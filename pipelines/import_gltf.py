@@ -21,11 +21,11 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from assetpipe.errors import AssetError, InvalidGeometryError, UnsupportedError
-from pipelines.gltf_document import GltfObject, check_structure
-from pipelines.gltf_accessors import AccessorReader, data_uri_mime, decode_data_uri
-from pipelines.image_source import image_from_bytes, read_image_file, resolve_inside
-from pipelines.model import ImageSource, ImportedModel, Material, MeshData, Sampler, TextureRef
+from assetpipe.core.errors import AssetError, InvalidGeometryError, UnsupportedError
+from assetpipe.pipelines.gltf_document import GltfObject, check_structure
+from assetpipe.pipelines.gltf_accessors import AccessorReader, data_uri_mime, decode_data_uri
+from assetpipe.pipelines.image_source import image_from_bytes, read_image_file, resolve_inside
+from assetpipe.pipelines.model import ImageSource, ImportedModel, Material, MeshData, Sampler, TextureRef
 
 SUPPORTED_EXTENSIONS = frozenset({
     "KHR_draco_mesh_compression",

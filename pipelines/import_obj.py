@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from assetpipe.errors import AssetError, InvalidGeometryError, MissingFileError
-from pipelines.image_source import read_image_file, resolve_inside
-from pipelines.model import (
+from assetpipe.core.errors import AssetError, InvalidGeometryError, MissingFileError
+from assetpipe.pipelines.image_source import read_image_file, resolve_inside
+from assetpipe.pipelines.model import (
     CLAMP_TO_EDGE,
     ImageSource,
     ImportedModel,
@@ -48,7 +48,7 @@ from pipelines.model import (
     Sampler,
     TextureRef,
 )
-from pipelines.triangulate import triangulate_polygons
+from assetpipe.pipelines.triangulate import triangulate_polygons
 
 __all__ = ["import_obj"]
 

@@ -34,9 +34,9 @@ from typing import Sequence
 
 import numpy as np
 
-from pipelines import simplify as simp
-from pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
-from pipelines.surface_error import Reference, SurfaceError, local_frame, measure_levels, prepare_reference
+from assetpipe.pipelines import simplify as simp
+from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
+from assetpipe.pipelines.surface_error import Reference, SurfaceError, local_frame, measure_levels, prepare_reference
 
 #: Bump when the output of this step changes for the same input and options (cache key).
 

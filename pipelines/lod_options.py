@@ -74,7 +74,7 @@ class LodOptions:
     measure: bool = True
 
     def __post_init__(self) -> None:
-        from assetpipe.errors import ConfigError
+        from assetpipe.core.errors import ConfigError
 
         if self.simplifier not in SIMPLIFIERS:
             raise ConfigError(f"unknown simplifier {self.simplifier!r} (one of {SIMPLIFIERS})")

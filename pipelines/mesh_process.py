@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
-from pipelines.model import MeshData
+from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
+from assetpipe.pipelines.model import MeshData
 
 
 @dataclass(frozen=True, eq=False)

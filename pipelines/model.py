@@ -59,7 +59,7 @@ class ImageSource:
     """An encoded image as found in the source (file, buffer view or data URI).
 
     ``data`` holds the encoded bytes exactly as stored (PNG, JPEG, ...). ``digest`` is the
-    content digest of ``data`` (see :mod:`assetpipe.hashing`), so identical images used by
+    content digest of ``data`` (see :mod:`assetpipe.core.hashing`), so identical images used by
     several materials or models are recognised as one.
     """
 

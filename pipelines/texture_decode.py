@@ -31,8 +31,8 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from assetpipe.errors import InvalidTextureError
-from pipelines.model import ImageSource
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.pipelines.model import ImageSource
 
 # 16384 x 16384 (Vulkan's common maxImageDimension2D, squared): 1 GiB as RGBA8 already.
 DEFAULT_MAX_PIXELS = 16384 * 16384

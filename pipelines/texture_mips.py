@@ -50,8 +50,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions  # noqa: F401 (re-exported)
-from pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions  # noqa: F401 (re-exported)
+from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
                              ROLE_OCCLUSION, SRGB_ROLES, TEXTURE_ROLES)
 
 

@@ -13,12 +13,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from assetpipe.errors import InvalidTextureError
-from assetpipe.ktx2 import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, write_ktx2
-from pipelines.model import ImageSource
-from pipelines.texture_decode import decode_image, has_alpha_below_255
-from pipelines.texture_mips import build_mip_chain
-from pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.core.ktx2 import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, write_ktx2
+from assetpipe.pipelines.model import ImageSource
+from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255
+from assetpipe.pipelines.texture_mips import build_mip_chain
+from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
 
 # When the output of process_texture changes for the same input and options (filtering,
 # KTX2 layout, level-0 encoding), bump assetpipe/versions.py's TEXTURE: the step's cache key.

@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from types import ModuleType
 
-from assetpipe.errors import RenderError
+from assetpipe.core.errors import RenderError
 
 LAVAPIPE_ICD = Path("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
 DEBIAN_PACKAGES = "mesa-vulkan-drivers libvulkan1 vulkan-validationlayers glslang-tools spirv-tools"
@@ -24,7 +24,7 @@ _vk: ModuleType | None = None
 def cache_root() -> Path:
     """The assetpipe cache root, the build cache's: ``$ASSETPIPE_CACHE``, else
     ``$XDG_CACHE_HOME/assetpipe``, else ``~/.cache/assetpipe``."""
-    from cache.store import default_cache_dir  # noqa: PLC0415
+    from assetpipe.cache.store import default_cache_dir  # noqa: PLC0415
 
     return default_cache_dir()
 

@@ -2,7 +2,7 @@
 
 Register them with::
 
-    from renderer.cli_commands import preview, validate
+    from assetpipe.renderer.cli_commands import preview, validate
     main.add_command(validate)
     main.add_command(preview)
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from assetpipe.errors import AssetpipeError
+from assetpipe.core.errors import AssetpipeError
 
 
 def find_built_models(paths: tuple[str, ...] | list[str]) -> list[Path]:
@@ -45,7 +45,8 @@ def validate(paths: tuple[str, ...], source_root: str | None, size: int, checks:
              timeout: float, json_report: str | None, junit: str | None, in_process: bool, verbose: bool) -> None:
     """Validate built models (OUT/ID.json files or OUT directories) by rendering them headless."""
     from .reports import summary, write_json_report, write_junit_report  # noqa: PLC0415
-    from .validate import CHECKS, ValidateOptions, validate_batch  # noqa: PLC0415
+    from .batch import validate_batch  # noqa: PLC0415
+    from .validate import CHECKS, ValidateOptions  # noqa: PLC0415
 
     selected = tuple(c.strip() for c in checks.split(",") if c.strip())
     unknown = set(selected) - set(CHECKS)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from assetpipe.errors import AssetError, InvalidGeometryError, InvalidTextureError, MissingFileError
+from assetpipe.core.errors import AssetError, InvalidGeometryError, InvalidTextureError, MissingFileError
 
 VK_FORMAT_R8G8B8A8_UNORM = 37
 VK_FORMAT_R8G8B8A8_SRGB = 43
@@ -41,8 +41,8 @@ _FORMATS: dict[str, tuple[np.dtype, int, float | None]] = {
 
 
 def read_ktx2(data: bytes) -> Any:
-    """The project's KTX2 reader (``assetpipe.ktx2.read_ktx2``): .vk_format, .width, .height, .levels."""
-    from assetpipe.ktx2 import read_ktx2 as project_reader  # noqa: PLC0415
+    """The project's KTX2 reader (``assetpipe.core.ktx2.read_ktx2``): .vk_format, .width, .height, .levels."""
+    from assetpipe.core.ktx2 import read_ktx2 as project_reader  # noqa: PLC0415
 
     return project_reader(data)
 

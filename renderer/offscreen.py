@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from assetpipe.errors import RenderError
+from assetpipe.core.errors import RenderError
 
 from .camera import Camera
 from .loader import RenderModel, Texture

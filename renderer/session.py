@@ -2,7 +2,7 @@
 
 The validation layer's Python callback can only be registered once per process, and
 device set-up is the expensive part, so every in-process user (tests, the renderer worker,
-``validate_model(isolate=False)``) shares this one context and renderer.
+``batch.validate_model(isolate=False)``) shares this one context and renderer.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from assetpipe.errors import RenderError
+from assetpipe.core.errors import RenderError
 
 from ._vk import INSTALL_HINT, cache_root
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from assetpipe.errors import AssetError, MissingFileError
+from assetpipe.core.errors import AssetError, MissingFileError
 
 from .loader import VK_FORMAT_R8G8B8A8_SRGB, Lod, Material, Mesh, RenderModel, Texture
 

@@ -45,11 +45,11 @@ import math
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
-from assetpipe.errors import AssetpipeError
+from assetpipe.core.errors import AssetpipeError
 
 from . import compare
 from .camera import DEFAULT_VIEW, Camera, box_corners, fit_camera, project_points
@@ -290,7 +290,7 @@ def find_source(model_json: Path, side: dict[str, Any], options: ValidateOptions
     rel = Path(sources[0]["path"])
     digest = sources[0].get("digest")
     cands = [rel] if rel.is_absolute() else [Path(model_json).parent / rel]
-    from assetpipe.state import source_of  # noqa: PLC0415 - the build's own record of its sources
+    from assetpipe.core.state_file import source_of  # noqa: PLC0415 - the build's own record of its sources
 
     recorded = source_of(Path(model_json).parent, side.get("id", Path(model_json).stem))
     if recorded is not None:
@@ -303,7 +303,7 @@ def find_source(model_json: Path, side: dict[str, Any], options: ValidateOptions
     found = [c for c in cands if c.is_file()]
     if len(found) > 1 and digest:
         try:
-            from assetpipe.hashing import digest_file  # noqa: PLC0415
+            from assetpipe.core.hashing import digest_file  # noqa: PLC0415
 
             same = [c for c in found if digest_file(c) == digest]
             found = same or found
@@ -536,56 +536,3 @@ def _check_lods(model: RenderModel, gpu: Any, options: ValidateOptions, renderer
                 msgs.append(f"LOD{k}: {bad} pixels differ from LOD0 by more than 1 px at its switch distance "
                             f"{switch:.4g} (budget {budget:.0f})")
     return CheckResult("lods", "fail" if msgs else "pass", figs, msgs, time.perf_counter() - t0)
-
-
-# ------------------------------------------------------------------------------- public
-def validate_model(model_json: Path | str, options: ValidateOptions | None = None,
-                   isolate: bool = True) -> ValidationResult:
-    """Validate one built model (``OUT/ID.json``).
-
-    ``isolate=True`` (the default) renders in a subprocess with ``options.timeout_s``, so a
-    driver crash becomes a failed result instead of killing the caller. ``isolate=False``
-    uses this process's shared renderer (tests, the worker itself).
-    """
-    options = options or ValidateOptions()
-    if isolate:
-        return validate_batch([model_json], options)[0]
-    from .session import shared_renderer  # noqa: PLC0415
-
-    t0 = time.perf_counter()
-    renderer = shared_renderer(options.width, options.height, validation=options.validation_layer,
-                               shader_cache=Path(options.shader_cache) if options.shader_cache else None)
-    setup = time.perf_counter() - t0
-    result = run_checks(Path(model_json), options, renderer)
-    result.timings["setup"] = setup
-    return result
-
-
-def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None = None,
-                   isolate: bool = True, progress: Any = None) -> list[ValidationResult]:
-    """Validate many built models with one long-lived renderer subprocess.
-
-    Device set-up happens once; each asset has ``options.timeout_s``. If the subprocess dies
-    (driver crash) or times out, that asset fails with a clear message and a fresh
-    subprocess continues the batch. ``progress(result)`` is called after each asset.
-    """
-    options = options or ValidateOptions()
-    paths = [Path(p) for p in paths]
-    if not isolate:
-        out = []
-        for p in paths:
-            r = validate_model(p, options, isolate=False)
-            out.append(r)
-            if progress:
-                progress(r)
-        return out
-    from .worker import WorkerPool  # noqa: PLC0415
-
-    with WorkerPool(options) as pool:
-        out = []
-        for p in paths:
-            r = pool.validate(p)
-            out.append(r)
-            if progress:
-                progress(r)
-        return out

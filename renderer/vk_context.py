@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from assetpipe.errors import RenderError
+from assetpipe.core.errors import RenderError
 
 from ._vk import INSTALL_HINT, load_vulkan
 

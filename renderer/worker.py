@@ -24,7 +24,7 @@ import traceback
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from assetpipe.errors import RenderError
+from assetpipe.core.errors import RenderError
 
 from ._vk import renderer_env
 from .validate import ValidateOptions, ValidationResult
@@ -106,7 +106,7 @@ class WorkerPool:
         env = renderer_env()
         root = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self.proc = subprocess.Popen([sys.executable, "-m", "renderer.worker"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
         self._buf = b""
 

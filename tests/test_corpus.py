@@ -45,7 +45,7 @@ def test_every_built_model_satisfies_the_seed_contract(corpus_build):
 @pytest.mark.vulkan
 def test_every_built_corpus_model_validates_on_lavapipe(corpus_build):
     """assetpipe validate with every check on (validation layer, silhouette, source, LODs, mips)."""
-    from renderer.validate import validate_batch
+    from assetpipe.renderer.batch import validate_batch
 
     _, out, report = corpus_build
     paths = [out / f"{a['id']}.json" for a in report["assets"]]

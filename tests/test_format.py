@@ -11,7 +11,7 @@ import pytest
 from assetpipe.format import (
     SEED_MATERIAL_KEYS, SEED_MESH_KEYS, SEED_MODEL_KEYS, OutputLod, OutputMaterial, OutputMesh,
     bounds_of, encode_model)
-from pipelines.mesh_options import ATTRIBUTE_COMPONENTS
+from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS
 
 LAYOUT = ("position", "uv0")
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import AssetError, MissingFileError
-from pipelines.gltf_accessors import AccessorReader, data_uri_mime, decode_data_uri
-from pipelines.import_gltf import _parse
+from assetpipe.core.errors import AssetError, MissingFileError
+from assetpipe.pipelines.gltf_accessors import AccessorReader, data_uri_mime, decode_data_uri
+from assetpipe.pipelines.import_gltf import _parse
 from gltf_builder import GltfBuilder
 
 INT_DTYPES = [np.int8, np.uint8, np.int16, np.uint16, np.uint32]

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from assetpipe.errors import AssetError
-from pipelines.gltf_document import GltfObject, check_structure
-from pipelines.import_gltf import import_gltf
+from assetpipe.core.errors import AssetError
+from assetpipe.pipelines.gltf_document import GltfObject, check_structure
+from assetpipe.pipelines.import_gltf import import_gltf
 
 GOOD = {"asset": {"version": "2.0"}, "buffers": [{"byteLength": 4}],
         "bufferViews": [{"buffer": 0, "byteLength": 4}],

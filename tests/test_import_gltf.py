@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import AssetError, InvalidGeometryError, MissingFileError, UnsupportedError
+from assetpipe.core.errors import AssetError, InvalidGeometryError, MissingFileError, UnsupportedError
 from gltf_builder import PNG_1X1, GltfBuilder
-from pipelines.import_gltf import import_gltf, node_matrix, triangles_from_mode
+from assetpipe.pipelines.import_gltf import import_gltf, node_matrix, triangles_from_mode
 
 TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)  # CCW seen from +z
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import AssetError, InvalidGeometryError
-from pipelines.import_obj import import_obj
-from pipelines.model import CLAMP_TO_EDGE, ImportedModel, MeshData
+from assetpipe.core.errors import AssetError, InvalidGeometryError
+from assetpipe.pipelines.import_obj import import_obj
+from assetpipe.pipelines.model import CLAMP_TO_EDGE, ImportedModel, MeshData
 
 
 # ---------------------------------------------------------------------------- helpers

@@ -20,7 +20,7 @@ import trimesh
 
 from assetpipe import steps, versions
 from assetpipe.build import run_build
-from assetpipe.hashing import digest_file
+from assetpipe.core.hashing import digest_file
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 
 REPO = Path(__file__).resolve().parents[1]
@@ -264,7 +264,7 @@ def test_a_killed_build_leaves_no_partial_output_and_the_next_one_completes(proj
         # every visible output is a complete file: its bytes are a blob of the store
         for rel, data in outputs(out).items():
             assert (project / "cache/objects").exists()
-            from assetpipe.hashing import digest_bytes
+            from assetpipe.core.hashing import digest_bytes
             d = digest_bytes(data).split(":")[1]
             assert (project / "cache/objects" / d[:2] / d[2:]).is_file(), rel
     r = subprocess.run(_cli(project), capture_output=True, text=True, cwd=REPO)

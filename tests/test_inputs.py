@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from assetpipe.errors import ConfigError
+from assetpipe.core.errors import ConfigError
 from assetpipe.inputs import assign_ids, discover_inputs
 
 

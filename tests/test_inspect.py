@@ -11,7 +11,7 @@ import pytest
 
 from assetpipe.format import OutputLod, OutputMaterial, OutputMesh, encode_model
 from assetpipe.inspect import check_model, summarize
-from pipelines.mesh_options import ATTRIBUTE_COMPONENTS
+from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS
 
 
 def _build(out: Path) -> Path:

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import InvalidTextureError
-from assetpipe.ktx2 import (KTX2_IDENTIFIER, VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, read_ktx2,
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.core.ktx2 import (KTX2_IDENTIFIER, VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, read_ktx2,
                             write_ktx2)
-from pipelines.texture_mips import build_mip_chain
+from assetpipe.pipelines.texture_mips import build_mip_chain
 
 REPO = Path(__file__).resolve().parents[1]
 

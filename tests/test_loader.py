@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import AssetError, InvalidGeometryError
-from renderer.loader import decode_vertices, load_built_model
+from assetpipe.core.errors import AssetError, InvalidGeometryError
+from assetpipe.renderer.loader import decode_vertices, load_built_model
 
 pytestmark = pytest.mark.vulkan
 BUILT = Path(__file__).parent / "data" / "built"

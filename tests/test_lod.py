@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipelines.lod import (
+from assetpipe.pipelines.lod import (
     DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain, reorder_for_lod_prefix)
 
 FAST = LodOptions(error_samples=5000)
@@ -254,7 +254,7 @@ def test_target_errors_mode():
 
 
 def test_options_validated():
-    from assetpipe.errors import ConfigError
+    from assetpipe.core.errors import ConfigError
 
     with pytest.raises(ConfigError):
         LodOptions(simplifier="nope")

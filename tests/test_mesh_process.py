@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipelines.mesh_options import MeshOptions
-from pipelines.mesh_process import (
+from assetpipe.pipelines.mesh_options import MeshOptions
+from assetpipe.pipelines.mesh_process import (
     compact, optimize_order, process_mesh, smooth_normals, tangents_from_uv, weld_vertices)
-from pipelines.model import MeshData
+from assetpipe.pipelines.model import MeshData
 
 NO_OPT = MeshOptions(optimize=False)
 
@@ -332,7 +332,7 @@ def test_layout_with_a_repeated_attribute_is_refused():
 
 def test_real_model_duck(corpus):
     """The Duck: welding finds its shared vertices, optimisation keeps every triangle."""
-    from pipelines.import_gltf import import_gltf
+    from assetpipe.pipelines.import_gltf import import_gltf
 
     (mesh,) = import_gltf(corpus / "models" / "Duck" / "glTF" / "Duck.gltf").meshes
     layout = MeshOptions(layout=("position", "uv0", "normal", "tangent"))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from renderer.preview import VIEWS, make_preview
+from assetpipe.renderer.preview import VIEWS, make_preview
 
 pytestmark = pytest.mark.vulkan
 CUBE = Path(__file__).parent / "data" / "built" / "cube" / "cube.json"

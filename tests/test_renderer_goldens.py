@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from renderer.goldens import GOLDEN_DIR, REPO, compare_model
+from assetpipe.renderer.goldens import GOLDEN_DIR, REPO, compare_model
 
 pytestmark = pytest.mark.vulkan
 
@@ -18,7 +18,7 @@ def test_cube_matches_goldens() -> None:
 
 @pytest.mark.parametrize("name", ["BoxTextured", "AlphaBlendModeTest", "TextureSettingsTest", "VertexColorTest"])
 def test_corpus_models_match_goldens(name: str, tmp_path, corpus) -> None:  # noqa: ANN001
-    from renderer.goldens import build_corpus_model
+    from assetpipe.renderer.goldens import build_corpus_model
 
     built = build_corpus_model(name, tmp_path / name)
     assert built is not None, f"assetpipe build failed for {name}"

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from assetpipe.errors import SceneError
+from assetpipe.core.errors import SceneError
 from assetpipe.scene import (
     ModelKey,
     attribute_reasons,
@@ -29,8 +29,8 @@ from assetpipe.scene import (
     select_levels,
     sphere_screen_px,
 )
-from pipelines.lod_options import LodOptions
-from pipelines.texture_options import TextureOptions
+from assetpipe.pipelines.lod_options import LodOptions
+from assetpipe.pipelines.texture_options import TextureOptions
 
 SCENES = Path(__file__).resolve().parent / "data" / "scenes"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -497,7 +497,7 @@ def test_attributes_needed():
 
 def test_attributes_needed_on_imported_example():
     """The import step's material dicts, as task_import records them."""
-    from pipelines.import_obj import import_obj
+    from assetpipe.pipelines.import_obj import import_obj
 
     model = import_obj(EXAMPLES / "pyramid" / "pyramid.obj")
     mats = [{"baseColorFactor": list(m.base_color_factor), "alphaMode": m.alpha_mode,
@@ -546,7 +546,7 @@ def test_check_shared_materials():
 
 def test_handmade_fixture_lists_share_materials():
     """The fixture's hand-made list, imported as the build would (no MTL: default material)."""
-    from pipelines.import_obj import import_obj
+    from assetpipe.pipelines.import_obj import import_obj
 
     metas = []
     for p in load_scene(SCENES / "seed.scene.json").objects[2].lod_files:

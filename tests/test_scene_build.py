@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from assetpipe.build import run_build
-from assetpipe.ktx2 import read_ktx2
+from assetpipe.core.ktx2 import read_ktx2
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 from seed_loader import load_seed_model
 
@@ -128,7 +128,7 @@ def test_a_hand_made_lod_list_is_one_model_with_measured_levels(corpus, tmp_path
     import meshoptimizer  # noqa: F401 - the simplifier makes the hand-made copies
     import trimesh
 
-    from pipelines.simplify import simplify
+    from assetpipe.pipelines.simplify import simplify
 
     src = tmp_path / "fuze"
     src.mkdir()

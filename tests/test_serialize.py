@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 
-from cache.serialize import MAGIC, pack, unpack
+from assetpipe.cache.serialize import MAGIC, pack, unpack
 
 DTYPES = ["<f4", ">f4", "<f8", "<f2", "<u4", ">u4", "<i8", "<u2", "u1", "i1", "?", "<c8", "<c16", "<U3",
           "S5", "<M8[s]", "<m8[ms]"]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipelines import simplify as S
+from assetpipe.pipelines import simplify as S
 
 
 def _sphere(sub: int = 4) -> tuple[np.ndarray, np.ndarray]:

@@ -8,9 +8,9 @@ import time
 
 import pytest
 
-from assetpipe.hashing import digest_bytes
-from cache import stat_cache as sc
-from cache.stat_cache import StatCache
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.cache import stat_cache as sc
+from assetpipe.cache.stat_cache import StatCache
 
 OLD = time.time_ns() - 60 * 1_000_000_000  # an mtime safely outside the racy window
 

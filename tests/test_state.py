@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from assetpipe.hashing import digest_bytes, digest_file
+from assetpipe.core.hashing import digest_bytes, digest_file
 from assetpipe.state import OutputState, source_of
-from assetpipe.writer import STATE_DIR
-from cache.stat_cache import StatCache
-from cache.store import Store
+from assetpipe.core.writer import STATE_DIR
+from assetpipe.cache.stat_cache import StatCache
+from assetpipe.cache.store import Store
 
 OLD = time.time_ns() - 3600 * 1_000_000_000
 

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from assetpipe.errors import CacheError
-from assetpipe.hashing import digest_bytes
-from cache import store as store_mod
-from cache.store import Store, default_cache_dir
+from assetpipe.core.errors import CacheError
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.cache import store as store_mod
+from assetpipe.cache.store import Store, default_cache_dir
 
 
 @pytest.fixture
@@ -195,7 +195,7 @@ def test_relative_xdg_cache_home_is_ignored(monkeypatch, tmp_path):
 def test_a_cache_folder_deleted_while_the_process_runs_is_made_again(tmp_path):
     import shutil
 
-    from cache.store import Store
+    from assetpipe.cache.store import Store
 
     s = Store(tmp_path / "c")
     d1 = s.put_blob(b"one")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipelines.surface_error import (
+from assetpipe.pipelines.surface_error import (
     closest_point_on_triangles, measure_error, points_to_mesh_distance, prepare_reference,
     measure_levels, sample_surface)
 

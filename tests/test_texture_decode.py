@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from assetpipe.errors import InvalidTextureError
-from assetpipe.hashing import digest_bytes
-from pipelines.image_source import sniff_mime
-from pipelines.model import ImageSource
-from pipelines.texture_decode import decode_image, has_alpha_below_255
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.pipelines.image_source import sniff_mime
+from assetpipe.pipelines.model import ImageSource
+from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255
 
 
 def source(data: bytes, name: str = "t.png", mime: str | None = None) -> ImageSource:

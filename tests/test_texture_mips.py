@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
                              ROLE_OCCLUSION)
-from pipelines.texture_mips import (TextureOptions, build_mip_chain, mip_level_count, mip_sizes,
+from assetpipe.pipelines.texture_mips import (TextureOptions, build_mip_chain, mip_level_count, mip_sizes,
                                     normal_unit_levels)
 
 # ----------------------------------------------------------------------------- references

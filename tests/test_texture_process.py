@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from assetpipe.errors import InvalidTextureError
-from assetpipe.hashing import digest_bytes
-from assetpipe.ktx2 import read_ktx2
-from pipelines.image_source import sniff_mime
-from pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.core.ktx2 import read_ktx2
+from assetpipe.pipelines.image_source import sniff_mime
+from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
                              ROLE_OCCLUSION, ImageSource)
-from pipelines.texture_mips import TextureOptions, mip_level_count
-from pipelines.texture_process import ProcessedTexture, process_texture
+from assetpipe.pipelines.texture_mips import TextureOptions, mip_level_count
+from assetpipe.pipelines.texture_process import ProcessedTexture, process_texture
 
 
 def source(data: bytes, name: str = "t.png", mime: str | None = None) -> ImageSource:

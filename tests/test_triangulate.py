@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipelines.triangulate import ear_clip, newell_normals, triangulate_polygon, triangulate_polygons
+from assetpipe.pipelines.triangulate import ear_clip, newell_normals, triangulate_polygon, triangulate_polygons
 
 
 def check(points: np.ndarray, corners: np.ndarray) -> None:

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from renderer.reports import write_json_report, write_junit_report
-from renderer.session import shared_renderer
-from renderer.validate import ValidateOptions, ValidationResult, validate_batch, validate_model
+from assetpipe.renderer.reports import write_json_report, write_junit_report
+from assetpipe.renderer.session import shared_renderer
+from assetpipe.renderer.batch import validate_batch, validate_model
+from assetpipe.renderer.validate import ValidateOptions, ValidationResult
 
 pytestmark = pytest.mark.vulkan
 BUILT = Path(__file__).parent / "data" / "built"
@@ -181,7 +182,7 @@ def test_timeout_fails_one_asset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 def test_cli_commands(tmp_path: Path) -> None:
     from click.testing import CliRunner
 
-    from renderer.cli_commands import preview, validate
+    from assetpipe.renderer.cli_commands import preview, validate
 
     runner = CliRunner()
     res = runner.invoke(validate, [str(BUILT), "--in-process", "--size", "96", "--junit", str(tmp_path / "j.xml")])

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from renderer.camera import fit_camera, project_points
-from renderer.loader import load_built_model
-from renderer.session import shared_renderer
+from assetpipe.renderer.camera import fit_camera, project_points
+from assetpipe.renderer.loader import load_built_model
+from assetpipe.renderer.session import shared_renderer
 
 pytestmark = pytest.mark.vulkan
 CUBE = Path(__file__).parent / "data" / "built" / "cube" / "cube.json"
@@ -85,7 +85,7 @@ def _run(code: str, **env: str) -> str:
 
 def test_missing_lavapipe_icd_names_the_packages() -> None:
     out = _run("from renderer._vk import load_vulkan\n"
-               "from assetpipe.errors import RenderError\n"
+               "from assetpipe.core.errors import RenderError\n"
                "try:\n    load_vulkan()\nexcept RenderError as e:\n    print('RenderError', e)\n",
                ASSETPIPE_VK_ICD="/nonexistent/lvp_icd.json")
     assert "RenderError" in out and "mesa-vulkan-drivers libvulkan1" in out
@@ -100,6 +100,6 @@ def test_missing_libvulkan_names_the_packages() -> None:
                "    return real(name, *a, **k)\n"
                "builtins.__import__ = fake\n"
                "from renderer.vk_context import VkContext\n"
-               "from assetpipe.errors import RenderError\n"
+               "from assetpipe.core.errors import RenderError\n"
                "try:\n    VkContext()\nexcept RenderError as e:\n    print('RenderError', e)\n")
     assert "RenderError" in out and "libvulkan.so.1" in out and "vulkan-validationlayers glslang-tools" in out

@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from assetpipe import writer
-from assetpipe.writer import STATE_DIR, sweep_tmp, tmp_dir, write_atomic
+from assetpipe.core import writer
+from assetpipe.core.writer import STATE_DIR, sweep_tmp, tmp_dir, write_atomic
 
 
 def test_write_creates_folders_and_leaves_no_temporary(tmp_path):

@@ -23,7 +23,7 @@ glTF / Vulkan) and ``KTXwriter = "assetpipe"``.
 
 The reader accepts exactly that family (any key/values, other 8-bit RGBA vkFormats are not
 accepted) and validates every field and offset it reads; malformed data raises
-:class:`assetpipe.errors.InvalidTextureError` with the problem in one line.
+:class:`assetpipe.core.errors.InvalidTextureError` with the problem in one line.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import Sequence
 
 import numpy as np
 
-from assetpipe.errors import InvalidTextureError
+from assetpipe.core.errors import InvalidTextureError
 
 KTX2_IDENTIFIER = b"\xabKTX 20\xbb\r\n\x1a\n"
 VK_FORMAT_R8G8B8A8_UNORM = 37
