@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import os
 import time
+import traceback
 from pathlib import Path
 from typing import Callable
 
-from assetpipe.build_types import AssetResult, AssetSpec, BuildReport, options_digest  # noqa: F401 (public)
+from assetpipe.build_types import (DEFAULT_BUILD_LIMITS, AssetResult, AssetSpec, BuildLimits,  # noqa: F401 (public)
+                                   BuildReport, options_digest)
 from assetpipe.inputs import assign_ids, discover_inputs
 
 
@@ -27,25 +29,64 @@ def _outputs_list(out_dir: Path, model_id: str) -> list[str]:
 
 def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1,
               cache_dir: Path | None = None,
-              on_result: Callable[[AssetResult, int, int], None] | None = None) -> BuildReport:
+              on_result: Callable[[AssetResult, int, int], None] | None = None,
+              limits: BuildLimits = DEFAULT_BUILD_LIMITS) -> BuildReport:
     """Build ``inputs`` (model files, folders, and scene files ``*.json``) into ``out_dir``.
 
     With scene files, only what the scenes reference is built (the other inputs are candidates,
     reported as skipped), each model with what its scenes need; ``OUT/<scene>.scene.json`` is
-    written per scene."""
+    written per scene.
+
+    One build at a time per output folder: a second one waits for ``OUT/.assetpipe/lock`` (and
+    says so on stderr), then starts from the first one's state, so neither loses the other's
+    sources or deletes its outputs."""
+    from assetpipe import versions
     from assetpipe.cache.stat_cache import StatCache
     from assetpipe.cache.store import Store, default_cache_dir
-    from assetpipe.state import OutputState
     from assetpipe.core.writer import sweep_tmp
 
-    t0 = time.perf_counter()
     scene_paths = [Path(p) for p in inputs if Path(p).suffix.lower() == ".json"]
     model_inputs = [p for p in inputs if Path(p).suffix.lower() != ".json"]
     sources = discover_inputs(model_inputs) if model_inputs else []
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    sweep_tmp(out_dir)
-    store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
+    lock = _lock_output(out_dir)
+    try:
+        t0 = time.perf_counter()
+        sweep_tmp(out_dir)
+        store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
+        versions.use_cache_dir(store.root)  # nothing is written outside -o and the cache
+        return _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_result, limits)
+    finally:
+        lock.close()
+
+
+def _lock_output(out_dir: Path):
+    """Take ``OUT/.assetpipe/lock`` (flock: released by the kernel when a killed build dies)."""
+    import fcntl
+    import sys
+
+    from assetpipe.core.errors import ConfigError
+    from assetpipe.core.writer import STATE_DIR
+
+    hidden = out_dir / STATE_DIR
+    root = os.path.realpath(out_dir)
+    if os.path.islink(hidden) or os.path.commonpath([root, os.path.realpath(hidden)]) != root:
+        raise ConfigError(f"{hidden} is a link leading out of the output folder: not writing there")
+    hidden.mkdir(exist_ok=True)
+    f = open(hidden / "lock", "a+b")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        print(f"assetpipe: waiting for another build into {out_dir} to finish", file=sys.stderr, flush=True)
+        fcntl.flock(f, fcntl.LOCK_EX)
+    return f
+
+
+def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_result, limits) -> BuildReport:
+    from assetpipe.cache.stat_cache import StatCache
+    from assetpipe.state import OutputState
+
     stat = StatCache(store.root / "stat-cache.json")
     state = OutputState(out_dir)
     results: list[AssetResult] = []
@@ -83,7 +124,8 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
 
     explain_steps = None
     if todo:
-        explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total)
+        explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total,
+                                       limits)
     results = [by_key[s.key] for s in specs] + results
     if scene_run is not None:
         results.extend(scene_run.write_outputs(state, store, stat, by_key, jobs))
@@ -97,14 +139,23 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
                        cache_dropped=list(store.dropped))
 
 
-def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total) -> dict:
+def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total, limits) -> dict:
+    from assetpipe.core.errors import AssetpipeError
     from assetpipe.graph import AssetState, Graph
 
     explain_prev = state.load_explain()
     graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs)
     assets = [AssetState(source=s.source, id=s.id, options=s.options, plan=s.plan, extra_sources=s.extra_sources,
                          key=s.key) for s in todo]
-    graph.build(assets)
+    try:
+        graph.build(assets)
+    except AssetpipeError:  # the cache is unusable, ...: the whole build stops with its one line
+        raise
+    except Exception as exc:  # a bug of ours between steps: every unfinished asset fails, the report is written
+        for a in assets:
+            if not a.failed and a.records.get("encode") is None:
+                a.error = f"{a.source}: internal error in the build graph ({type(exc).__name__}: {exc}); please report it"
+                a.internal = traceback.format_exc()
     explain_steps = dict(explain_prev)
     for spec, a in zip(todo, assets):
         key = spec.key
@@ -114,9 +165,17 @@ def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_resu
         r.skipped = list(dict.fromkeys(a.skipped))
         if not a.failed:
             try:
+                _check_output_size(a, store, limits)
                 table, notes = state.materialise(store, a.outputs, state.assets.get(key))
+            except AssetpipeError as exc:
+                a.error = f"{a.source}: {exc}"
             except OSError as exc:
                 a.error = f"{a.source}: cannot write outputs to {out_dir} ({exc})"
+            except MemoryError:
+                a.error = f"{a.source}: out of memory writing its outputs"
+            except Exception as exc:  # a bug of ours: this asset fails, the others are written
+                a.error = f"{a.source}: internal error writing its outputs ({type(exc).__name__}: {exc}); please report it"
+                a.internal = traceback.format_exc()
             else:
                 ran = [run for run in a.runs if run.ran]
                 r.status = "built" if ran else "cached"
@@ -141,3 +200,18 @@ def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_resu
         if on_result:
             on_result(r, len(by_key), total)
     return explain_steps
+
+
+def _check_output_size(a, store, limits: BuildLimits) -> None:
+    """Fail the asset (one line) when its outputs together exceed ``limits.max_output_bytes``."""
+    from assetpipe.core.errors import AssetError
+
+    total = 0
+    for digest in set(a.outputs.values()):
+        try:
+            total += store.blob_path(digest).stat().st_size
+        except OSError:
+            pass  # a vanished blob: materialise says so
+    if total > limits.max_output_bytes:
+        raise AssetError(None, f"its outputs would take {total / 2**20:.1f} MiB, over the per-model limit of "
+                               f"{limits.max_output_bytes / 2**20:.0f} MiB (--max-output-mb)")

@@ -72,6 +72,24 @@ class BuildReport:
         write_atomic(Path(path), (json.dumps(self.to_json(), indent=2) + "\n").encode())
 
 
+# One model's outputs (its files and textures) larger than this fail the model: a sanity limit
+# against small inputs that decode to far more than they weigh (#13: a 419 KB PNG wrote 733 MB).
+# 2 GiB holds one 16384 x 16384 RGBA8 texture (the usual device limit): its uncompressed KTX2 mip
+# chain is 4/3 GiB, plus its PNG level 0. --max-output-mb; docs/BUILD.md.
+DEFAULT_MAX_OUTPUT_BYTES = 2 << 30
+
+
+@dataclass(frozen=True)
+class BuildLimits:
+    """Limits that apply to the build as a whole, per model (not step options: changing one
+    rebuilds nothing)."""
+
+    max_output_bytes: int = DEFAULT_MAX_OUTPUT_BYTES
+
+
+DEFAULT_BUILD_LIMITS = BuildLimits()
+
+
 def options_digest(options_json: dict) -> str:
     return digest_json({"assetpipe": __version__, "steps": versions.STEP_VERSIONS,
                         "libs": versions.library_versions(), "options": options_json})

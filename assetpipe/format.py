@@ -146,7 +146,7 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
     side_mats = [{"id": m.id, "name": m.name, "baseColorFactor": [_num(c) for c in m.color],
                   "alphaMode": m.alpha_mode, "alphaCutoff": _num(m.alpha_cutoff),
                   "doubleSided": m.double_sided, "transparent": m.transparent,
-                  "textures": m.textures} for m in materials]
+                  "textures": {role: m.textures[role] for role in sorted(m.textures)}} for m in materials]
     sidecar = {
         "formatVersion": FORMAT_VERSION,
         "id": model_id,

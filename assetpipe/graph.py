@@ -22,12 +22,13 @@ parallel on a process pool when ``jobs > 1``. Results do not depend on ``jobs``.
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from assetpipe import steps, versions
-from assetpipe.core.hashing import digest_json
+from assetpipe.core.hashing import canonical_json, digest_json
 from assetpipe.cache.stat_cache import StatCache
 from assetpipe.cache.store import Store
 
@@ -207,15 +208,24 @@ class Graph:
             for a, _, _ in owners[key]:
                 a.seconds += secs
             if status == "ok":
+                try:  # a fresh record reads back exactly as a cached one (sorted keys): same outputs
+                    value = json.loads(canonical_json(value))
+                except ValueError:  # NaN or infinity (a value in the file overflows): that asset fails
+                    status, value = "nonfinite", "a number that is not finite (NaN or infinity) reached its result"
+            if status == "ok":
                 self.store.put_record(key, value)
                 results[key] = value
             else:
                 results[key] = None
                 for a, label, _ in owners[key]:
+                    if status == "memory":
+                        value = f"out of memory in step {label}"
                     if label.startswith("texture"):
-                        a.warnings.append(f"{label} skipped: {value if status == 'asset' else 'internal error'}")
+                        a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
                         if status == "internal":
                             a.warnings.append(str(value))
+                    elif status in ("memory", "nonfinite"):
+                        a.error = f"{a.source}: step {label}: {value}"
                     elif status == "asset":
                         a.error = str(value)
                     else:
@@ -312,6 +322,8 @@ class Graph:
         for a in assets:
             mesh_opts = self._mesh_opts(a)
             lod0_uvs: list[int] = []
+            # every level is recentred on LOD0's bounding-box centre: one offset per model
+            offset = a.records["import"]["meta"]["center"] if mesh_opts.get("recenter") else None
             for suffix, _ in a.level_sources:
                 imp = a.records["import" + suffix]
                 blob = imp["blobs"]["geometry"]
@@ -321,8 +333,12 @@ class Graph:
                     uvs = steps.uv_sets(imp["meta"]["materials"], imp["meta"]["meshMaterials"])
                     if len(uvs) == len(lod0_uvs):
                         uvs = [u if u0 >= 0 else -1 for u, u0 in zip(uvs, lod0_uvs)]
-                kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs)}, mesh_opts)
-                jobs.append(([a], "mesh" + suffix, kin, (steps.task_mesh, str(self.store.root), blob, uvs, mesh_opts)))
+                mats = imp["meta"]["materials"]
+                sided = [bool(0 <= m < len(mats) and mats[m]["doubleSided"]) for m in imp["meta"]["meshMaterials"]]
+                kin = self._key_inputs("mesh", {"geometry": blob, "uvSets": digest_json(uvs),
+                                                "doubleSided": digest_json(sided), "offset": offset}, mesh_opts)
+                jobs.append(([a], "mesh" + suffix, kin, (steps.task_mesh, str(self.store.root), blob, uvs, mesh_opts,
+                                                         sided, offset)))
             imp = a.records["import"]
             images = imp["meta"]["images"]
             base = a.source.parent
@@ -348,7 +364,17 @@ class Graph:
                                                    role, alpha, cutoff, tex_opts)))
         self._run_phase(jobs)
         for a in assets:
-            if a.plan is None:
+            for suffix, path in a.level_sources:
+                rec = a.records.get("mesh" + suffix)
+                if rec is None or a.failed:
+                    continue
+                a.warnings.extend(rec["meta"].get("warnings", []))
+                if rec["meta"].get("triangles") == 0 and rec["meta"].get("degenerate", 0) > 0:
+                    a.error = (f"{path}: every one of its {rec['meta']['degenerate']} triangles is degenerate in "
+                               "float32 (zero area, a repeated vertex, or a position beyond float32's range): "
+                               "nothing left to build")
+        for a in assets:
+            if a.plan is None or a.failed:
                 continue
             cap = self._tex_opts(a).get("max_size")
             for label in dict.fromkeys(a.texture_jobs.values()):
@@ -438,9 +464,10 @@ class Graph:
             layout = self._layout(a)
             tin = {"lod": lod_blob, "materials": digest_json(materials), "sources": digest_json(sources),
                    "warnings": digest_json(warnings)}
-            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": layout, "keep": keep})
+            offset = a.records["import"]["meta"]["center"] if self._mesh_opts(a).get("recenter") else None
+            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": layout, "keep": keep, "offset": offset})
             jobs.append(([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, layout,
-                                              materials, sources, warnings, keep)))
+                                              materials, sources, warnings, keep, offset)))
         self._run_phase(jobs)
         for a in assets:
             rec = a.records.get("encode")

@@ -11,6 +11,12 @@ from assetpipe.core.errors import ConfigError
 MODEL_SUFFIXES = (".gltf", ".glb", ".obj")
 
 
+def _suffix(name: str) -> str:
+    """The suffix by pathlib's rule, for files found in folders and files named alike
+    (``os.path.splitext`` sees none in ``...obj``; pathlib sees ``.obj``)."""
+    return Path(name).suffix.lower()
+
+
 def _walk(folder: Path) -> list[Path]:
     """Model files under ``folder``, recursively, in sorted order. One scandir per folder and
     no stat per file (the directory entry's type says whether it is a file)."""
@@ -25,7 +31,7 @@ def _walk(folder: Path) -> list[Path]:
         for e in entries:
             if e.is_dir():
                 stack.append(e.path)
-            elif os.path.splitext(e.name)[1].lower() in MODEL_SUFFIXES and e.is_file():
+            elif _suffix(e.name) in MODEL_SUFFIXES and e.is_file():
                 out.append(e.path)
     out.sort(key=lambda f: f.split(os.sep))
     return [Path(f) for f in out]
@@ -75,7 +81,9 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
 
     def candidate(p: Path, depth: int) -> str:
         parts = [*parent[p].parts[len(parent[p].parts) - depth:], name[p]] if depth else [name[p]]
-        return _UNSAFE.sub("_", "_".join(parts)).strip("_") or "model"
+        # a safe file name: [A-Za-z0-9._-] only, never starting or ending with '.' or '_'
+        # (so never '', '.', '..' or a hidden file)
+        return _UNSAFE.sub("_", "_".join(parts)).strip("_.") or "model"
 
     depth = {p: 0 for p in sources}
     while True:

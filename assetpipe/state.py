@@ -15,6 +15,7 @@ import json
 import os
 from pathlib import Path
 
+from assetpipe.core.errors import ConfigError
 from assetpipe.core.hashing import digest_file
 from assetpipe.core.state_file import read_json_dict as _read_json
 from assetpipe.core.state_file import source_of  # noqa: F401 (re-exported)
@@ -112,9 +113,14 @@ class OutputState:
         table, notes = {}, []
         prev = (previous or {}).get("outputs", {})
         tmp = tmp_dir(self.out_dir)
+        root = os.path.realpath(self.out_dir)
         for rel in sorted(outputs):
             digest = outputs[rel]
             p = self.out_dir / rel
+            # nothing is written outside OUT: not a path that leaves it, nor through a link in it
+            if not confined_rel(rel) or os.path.commonpath([root, os.path.realpath(p.parent)]) != root:
+                raise ConfigError(f"output {rel} would be written outside {self.out_dir} "
+                                  "(a link in the output folder leads out of it): refused")
             try:
                 st = os.stat(p)
                 same = (prev.get(rel, [None])[0] == digest and st.st_size == prev[rel][1]

@@ -31,8 +31,8 @@ def call_task(fn, *args) -> tuple[str, object, float]:
         return "ok", fn(*args), time.perf_counter() - t0
     except AssetError as exc:
         return "asset", str(exc), time.perf_counter() - t0
-    except MemoryError:
-        return "asset", "out of memory", time.perf_counter() - t0
+    except MemoryError:  # the graph names the input and the step
+        return "memory", "out of memory", time.perf_counter() - t0
     except Exception as exc:  # a bug of ours
         return "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", time.perf_counter() - t0
 
@@ -116,11 +116,12 @@ def task_import(store_root: str, source: str) -> dict:
         pos = np.vstack([m.positions for m in model.meshes])
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         radius = float(np.sqrt(np.max(np.sum((pos - (lo + hi) / 2) ** 2, axis=1)))) if pos.size else 0.0
+        center = ((lo + hi) / 2).tolist() if pos.size else [0.0, 0.0, 0.0]
     else:
-        radius = 0.0
+        radius, center = 0.0, [0.0, 0.0, 0.0]
     return {"blobs": blobs, "meta": {"deps": deps, "images": images, "materials": materials,
                                      "meshMaterials": [m.material for m in model.meshes],
-                                     "radius": radius, "warnings": list(model.warnings)}}
+                                     "radius": radius, "center": center, "warnings": list(model.warnings)}}
 
 
 def load_geometry(store: Store, digest: str):
@@ -151,8 +152,12 @@ def uv_sets(materials: list[dict], mesh_materials: list[int]) -> list[int]:
     return out
 
 
-def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int], mesh_options: dict) -> dict:
-    from assetpipe.pipelines.mesh_process import MeshOptions, process_mesh
+def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int], mesh_options: dict,
+              double_sided: list[bool] | None = None, offset: list[float] | None = None) -> dict:
+    """``double_sided[i]``: mesh i's material's flag; ``offset``: the recentring offset (the
+    LOD0 file's bounding-box centre) subtracted from positions, or None."""
+    from assetpipe.pipelines.mesh_process import (FLOAT32_WARN_FRACTION, MeshOptions, float32_resolution,
+                                                   process_mesh)
 
     store = Store(Path(store_root))
     opts = options_from_json(MeshOptions, mesh_options)
@@ -161,13 +166,26 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
     for i, mesh in enumerate(meshes):
         if uv_set_per_mesh[i] < 0:  # no material of the mesh samples a texture: UVs not computed
             mesh = dataclasses.replace(mesh, uv0=None, uv1=None)
-        pm = process_mesh(mesh, opts, uv_set=max(uv_set_per_mesh[i], 0))
+        pm = process_mesh(mesh, opts, uv_set=max(uv_set_per_mesh[i], 0),
+                          double_sided=bool(double_sided[i]) if double_sided else False, offset=offset)
         arrays[f"{i}.vertices"] = pm.vertices
         arrays[f"{i}.indices"] = pm.indices
         out_meta.append({"name": pm.name, "material": pm.material, "degenerate": pm.degenerate_dropped,
-                         "welded": pm.welded, "warnings": list(pm.warnings), "hasUv": mesh.uv0 is not None})
+                         "duplicates": pm.duplicates_dropped, "welded": pm.welded, "warnings": list(pm.warnings),
+                         "hasUv": mesh.uv0 is not None})
+    warnings = []
+    written = [pm_v[:, :3] for k, pm_v in arrays.items() if k.endswith(".vertices") and pm_v.shape[0]]
+    step, diag = float32_resolution(np.vstack(written)) if written else (0.0, 0.0)
+    if diag > 0 and step > FLOAT32_WARN_FRACTION * diag:
+        warnings.append(f"float32 positions are {step:.3g} apart at this distance from the origin, "
+                        f"{step / diag:.2g} of the model's size (over {FLOAT32_WARN_FRACTION:g}): shapes are "
+                        "distorted" + ("" if offset is not None else
+                                      "; build with --recenter to write positions relative to the model's centre"))
     blob = store.put_blob(pack({"meshes": out_meta}, arrays))
-    return {"blobs": {"mesh": blob}, "meta": {}}
+    return {"blobs": {"mesh": blob},
+            "meta": {"triangles": int(sum(arrays[f"{i}.indices"].shape[0] for i in range(len(meshes)))),
+                     "degenerate": int(sum(m["degenerate"] for m in out_meta)),
+                     "float32Step": step, "diagonal": diag, "warnings": warnings}}
 
 
 # -- LOD ------------------------------------------------------------------------------------
@@ -294,8 +312,9 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
 
 def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[str],
                 materials: list[dict], sources: list[dict], warnings: list[str],
-                keep: list[list[int]] | None = None) -> dict:
-    """Encode the output files of one model; each file becomes a blob.
+                keep: list[list[int]] | None = None, position_offset: list[float] | None = None) -> dict:
+    """Encode the output files of one model; each file becomes a blob. ``position_offset``:
+    a recentred model's offset (the sidecar's ``positionOffset``).
 
     ``keep[i]``: the levels of mesh i's chain to write (contiguous; its first becomes the
     output LOD0, with the vertex prefix it uses); None keeps every level."""
@@ -310,10 +329,11 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
     warnings = list(warnings)
     n_mats = len(materials)
     meshes = []
-    degenerate = welded = 0
+    degenerate = welded = duplicates = 0
     for i, m in enumerate(meta["meshes"]):
         warnings.extend(m["warnings"])
         degenerate += m["degenerate"]
+        duplicates += m.get("duplicates", 0)
         welded += m["welded"]
         kept = keep[i] if keep is not None else list(range(len(m["lods"])))
         lods = tuple(OutputLod(indices=arrays[f"{i}.lod{k}"], vertex_count=m["lods"][k]["vertexCount"],
@@ -338,10 +358,11 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
                 for i, m in enumerate(materials)]
     stats = {"meshes": len(meshes), "triangles": int(sum(x.lods[0].indices.shape[0] for x in meshes)),
              "vertices": int(sum(x.vertices.shape[0] for x in meshes)),
-             "degenerateTriangles": degenerate, "weldedVertices": welded,
+             "degenerateTriangles": degenerate, "duplicateTriangles": duplicates, "weldedVertices": welded,
              "lodLevels": max((len(x.lods) for x in meshes), default=0)}
     files = encode_model(model_id, meshes, out_mats, tuple(layout), ATTRIBUTE_COMPONENTS, stats=stats,
                          warnings=list(dict.fromkeys(warnings)), sources=sources,
-                         generator=f"assetpipe {__version__}")
+                         generator=f"assetpipe {__version__}",
+                         extra={"positionOffset": list(position_offset)} if position_offset is not None else None)
     return {"blobs": {name: store.put_blob(b) for name, b in files.items()},
             "meta": {"stats": stats, "warnings": list(dict.fromkeys(warnings))}}

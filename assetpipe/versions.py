@@ -4,11 +4,11 @@ Bump a step's version when its output changes for the same inputs and options: i
 that step's cache key, so every cached result of the old version is rebuilt.
 """
 
-IMPORT = 2  # 2: geometry-only blob
-MESH = 2  # 2: non-finite UVs cleaned before tangents are derived
+IMPORT = 3  # 2: geometry-only blob; 3: meta has the bounding-box centre (--recenter)
+MESH = 3  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates
 LOD = 3  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack
 TEXTURE = 1
-ENCODE = 1
+ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
 
 STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE, "encode": ENCODE,
@@ -18,6 +18,14 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
           "point-cloud-utils", "fast-simplification")
 _cached: dict | None = None
+_memo_dir = None  # the build's cache folder (use_cache_dir); None: the default one
+
+
+def use_cache_dir(path) -> None:
+    """Remember library versions in ``path`` (the build's cache), not the default cache folder:
+    a build given ``--cache`` writes nothing outside it and ``-o``."""
+    global _memo_dir
+    _memo_dir = path
 
 
 def _site_dirs() -> list[str]:
@@ -43,6 +51,7 @@ def library_versions() -> dict:
         return dict(_cached)
     import json
     import os
+    from pathlib import Path
 
     from assetpipe.cache.store import default_cache_dir
 
@@ -52,7 +61,7 @@ def library_versions() -> dict:
             stamp.append([d, os.stat(d).st_mtime_ns])
         except OSError:
             pass
-    memo = default_cache_dir() / "library-versions.json"
+    memo = (Path(_memo_dir) if _memo_dir is not None else default_cache_dir()) / "library-versions.json"
     try:
         data = json.loads(memo.read_bytes())
         if data.get("stamp") == stamp and set(data.get("versions", {})) == set(_DISTS):

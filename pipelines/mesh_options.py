@@ -20,6 +20,10 @@ class MeshOptions:
     # a triangle whose doubled area is below this fraction of the squared bounding diagonal is
     # degenerate (zero area up to float rounding)
     degenerate_area_tolerance: float = 1e-14
+    # write positions relative to the model's bounding-box centre (the offset goes into the
+    # sidecar's ``positionOffset``): float32 keeps ~7 digits, so a model far from its origin
+    # loses its shape; engines recentre (docs/FORMAT.md, "Precision")
+    recenter: bool = False
 
     def __post_init__(self):
         unknown = [a for a in self.layout if a not in ATTRIBUTE_COMPONENTS]

@@ -7,11 +7,20 @@
 2. sanitise non-finite UVs / normals (set to 0, counted in a warning);
 3. join identical vertices (exact equality of every kept attribute, like
    ``aiProcess_JoinIdenticalVertices``);
-4. drop degenerate triangles: a repeated index, or zero area (measured in float64 in a local
-   frame, relative to the mesh size);
+4. round positions to float32 (what the output stores; relative to an ``offset`` when the
+   model is recentred) and drop degenerate triangles *of that data*: a repeated index, or zero
+   area (measured in float64 in a local frame, relative to the mesh size), so a model far
+   from its origin, whose float32 positions collapse, is counted and dropped the same way
+   whether it came as float64 OBJ text or float32 glTF;
 5. generate smooth normals where the layout needs them and the source has none, and tangents
    where the layout carries them (``aiProcess_GenSmoothNormals`` / ``aiProcess_CalcTangentSpace``);
-6. vertex cache then vertex fetch optimisation (meshoptimizer), which also drops unreferenced
+6. drop duplicate triangles (after the weld, so they are found by vertex identity): exact
+   ones (the same three vertices, the same winding, from any starting vertex) always, and
+   reversed ones (the same three vertices, opposite winding) when the material is double-sided,
+   where the two faces cover the same pixels from both sides and z-fight; a single-sided
+   material keeps a reversed pair (back-face culling shows exactly one of them from each side:
+   the pair is how a one-sided material shows both sides);
+7. vertex cache then vertex fetch optimisation (meshoptimizer), which also drops unreferenced
    vertices.
 """
 
@@ -23,6 +32,12 @@ import numpy as np
 
 from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
 from assetpipe.pipelines.model import MeshData
+
+
+# warn when the float32 position grid, at the model's largest coordinate, is coarser than this
+# fraction of the bounding-box diagonal (1e-4: a 1 m model's vertices snap to 0.1 mm steps; reached
+# near |x| = 840 to 1700 diagonals from the origin); docs/FORMAT.md, "Precision"
+FLOAT32_WARN_FRACTION = 1e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,6 +54,7 @@ class ProcessedMesh:
     indices: np.ndarray
     degenerate_dropped: int = 0
     welded: int = 0
+    duplicates_dropped: int = 0
     warnings: tuple[str, ...] = field(default=())
 
     @property
@@ -46,11 +62,20 @@ class ProcessedMesh:
         return self.vertices[:, :3]
 
 
-def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv_set: int = 0) -> ProcessedMesh:
+def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv_set: int = 0,
+                 double_sided: bool = False, offset=None) -> ProcessedMesh:
     """Process one mesh. ``uv_set``: the UV set the material's base colour texture samples
-    (its ``texCoord``); it goes into the layout's ``uv0`` slot, the other set into ``uv1``."""
+    (its ``texCoord``); it goes into the layout's ``uv0`` slot, the other set into ``uv1``.
+    ``double_sided``: the material's; reversed duplicate triangles are dropped only then.
+    ``offset`` (3,): subtracted from the positions (in float64) before they are rounded to
+    float32 (a recentred model)."""
     warnings: list[str] = []
     pos = np.asarray(mesh.positions, dtype=np.float64)
+    if offset is not None:
+        pos = pos - np.asarray(offset, dtype=np.float64).reshape(1, 3)
+    # what the output stores: every later step (degenerates, normals, LODs and their errors)
+    # sees exactly the float32 positions written
+    pos = to_float32_exact(pos)
     n = pos.shape[0]
     tris = np.asarray(mesh.indices, dtype=np.uint32).reshape(-1, 3)
     uv_a, uv_b = (mesh.uv1, mesh.uv0) if uv_set == 1 and mesh.uv1 is not None else (mesh.uv0, mesh.uv1)
@@ -75,13 +100,22 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
         provided[name] = arr
     uv_a = provided["uv0"]
 
-    # 4 (first half). degenerate by repeated index: cheap, before anything else
+    # 4. degenerate triangles of the float32 data
     degenerate = 0
+    finite = np.isfinite(pos).all(axis=1)
+    if not finite.all():  # beyond float32's range (|x| > 3.4e38): such a vertex cannot be written
+        warnings.append(f"{mesh.name}: {int((~finite).sum())} position(s) beyond float32's range; "
+                        "their triangles dropped")
+        pos = np.where(finite[:, None], pos, 0.0)
+        provided["position"] = pos
+        off_range = ~finite[tris].all(axis=1) if tris.shape[0] else np.zeros(0, dtype=bool)
+        degenerate += int(off_range.sum())
+        tris = tris[~off_range]
     if options.drop_degenerate and tris.shape[0]:
         rep = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
         area_bad = _zero_area(pos, tris, options.degenerate_area_tolerance)
         bad = rep | area_bad
-        degenerate = int(bad.sum())
+        degenerate += int(bad.sum())
         tris = tris[~bad]
 
     columns = []
@@ -104,19 +138,78 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
     if options.weld and n:
         verts, tris, welded = weld_vertices(verts, tris)
 
+    tris, duplicates = drop_duplicate_triangles(tris, drop_reversed=double_sided)
+
     if options.optimize and tris.shape[0]:
         verts, tris = optimize_order(verts, tris)
     else:
         verts, tris = compact(verts, tris)
     return ProcessedMesh(name=mesh.name, material=mesh.material, vertices=verts, indices=tris,
-                         degenerate_dropped=degenerate, welded=welded, warnings=tuple(warnings))
+                         degenerate_dropped=degenerate, welded=welded, duplicates_dropped=duplicates,
+                         warnings=tuple(warnings))
+
+
+def to_float32_exact(pos: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 holding exactly the float32 values the output will store (round to
+    nearest, as numpy and every glTF writer do); a value beyond float32's range becomes inf."""
+    with np.errstate(over="ignore"):
+        return np.asarray(pos, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+def float32_resolution(pos32: np.ndarray) -> tuple[float, float]:
+    """(step, diagonal): the float32 spacing at the largest coordinate magnitude of ``pos32``
+    (the coarsest position step anywhere in the mesh: a vertex can only sit on that grid) and
+    the bounding box diagonal. ``step / diagonal`` is the shape's resolution in float32."""
+    if pos32.shape[0] == 0:
+        return 0.0, 0.0
+    p = np.asarray(pos32, dtype=np.float64)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
+    step = float(np.spacing(np.float32(np.max(np.maximum(np.abs(lo), np.abs(hi))))))
+    return step, diag
+
+
+def drop_duplicate_triangles(tris: np.ndarray, drop_reversed: bool = False) -> tuple[np.ndarray, int]:
+    """(tris without duplicates, count dropped); the first of each kept, order kept.
+
+    Exact duplicates: the same three vertex indices in the same cyclic order. With
+    ``drop_reversed`` also the opposite cyclic order. Sort-based: O(M log M), vectorised (each
+    triangle becomes one integer key: the rotation starting at its smallest index, packed)."""
+    m = tris.shape[0]
+    if m < 2:
+        return tris, 0
+    t = np.asarray(tris, dtype=np.int64)
+    first = np.argmin(t, axis=1)
+    rows = np.arange(m)
+    a = t[rows, first]
+    b = t[rows, (first + 1) % 3]
+    c = t[rows, (first + 2) % 3]
+    lo, hi = np.minimum(b, c), np.maximum(b, c)
+    flipped = b > c  # the cyclic order (a, b, c) reads (a, hi, lo): the reversed winding
+    bits = max(int(t.max()).bit_length(), 1)
+    if 3 * bits + 1 <= 63:
+        key = (((a << bits) | lo) << bits | hi)
+        if not drop_reversed:
+            key = (key << 1) | flipped
+        _, keep = np.unique(key, return_index=True)
+    else:  # > 2^20 vertices: rows of (a, lo, hi[, flipped]) instead of one packed integer
+        cols = [a, lo, hi] if drop_reversed else [a, lo, hi, flipped.astype(np.int64)]
+        k = np.ascontiguousarray(np.stack(cols, axis=1))
+        _, keep = np.unique(k.view(np.dtype((np.void, 8 * k.shape[1]))).reshape(m), return_index=True)
+    if keep.size == m:
+        return tris, 0
+    keep.sort()
+    return tris[keep], int(m - keep.size)
 
 
 def _zero_area(pos: np.ndarray, tris: np.ndarray, tolerance: float) -> np.ndarray:
     """(M,) bool: triangles whose area is zero relative to the mesh's size (float64, centred)."""
     if tris.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    mask = np.zeros(pos.shape[0], dtype=bool)
+    mask[tris.reshape(-1)] = True
+    used = pos[mask]  # the referenced vertices: the size of what is drawn
+    lo, hi = used.min(axis=0), used.max(axis=0)
     local = pos - (lo + hi) * 0.5
     diag2 = float(np.sum((hi - lo) ** 2))
     a, b, c = local[tris[:, 0]], local[tris[:, 1]], local[tris[:, 2]]

@@ -44,10 +44,11 @@ def _uv_sphere(n_lon: int = 48, n_lat: int = 24, r: float = 2.0):
 
 
 def _tri_set(vertices: np.ndarray, tris: np.ndarray) -> set:
-    """Triangles as position triples, rotated to a canonical start (winding kept)."""
+    """Triangles as position triples, rotated to a canonical start (winding kept), compared as
+    the float32 values the output stores."""
     out = set()
     for t in tris:
-        p = [tuple(vertices[i, :3]) for i in t]
+        p = [tuple(vertices[i, :3].astype(np.float32).tolist()) for i in t]
         k = min(range(3), key=lambda q: p[q])
         out.add(tuple(p[k:] + p[:k]))
     return out
