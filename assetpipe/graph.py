@@ -113,9 +113,7 @@ class Executor:
         self.jobs = max(1, int(jobs))
         self.pool = None
         if self.jobs > 1:  # multiprocessing costs ~15 ms to import: only when asked for
-            from concurrent.futures import ProcessPoolExecutor
-
-            self.pool = ProcessPoolExecutor(self.jobs)
+            self.pool = self._new_pool()
 
     def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
         if self.pool is None or len(calls) <= 1:
@@ -132,14 +130,20 @@ class Executor:
                 self._restart()
         return out
 
-    def _restart(self):
+    def _new_pool(self):
+        """A process pool whose workers die with this process (assetpipe/worker_life.py)."""
         from concurrent.futures import ProcessPoolExecutor
 
+        from assetpipe.worker_life import init_worker
+
+        return ProcessPoolExecutor(self.jobs, initializer=init_worker, initargs=(os.getpid(),))
+
+    def _restart(self):
         try:
             self.pool.shutdown(wait=False, cancel_futures=True)
         except Exception:
             pass
-        self.pool = ProcessPoolExecutor(self.jobs)
+        self.pool = self._new_pool()
 
     def close(self):
         if self.pool is not None:
@@ -267,7 +271,9 @@ class Graph:
                     a.error = f"{src}: file not found"
                     break
                 a.inputs[str(src.resolve())] = src_digest
-                kin = self._key_inputs("import", {"source": src_digest}, None)
+                # the name too: an OBJ's unnamed mesh is named after its file (#13: a cached import
+                # of the same bytes under another name gave the other file's mesh name)
+                kin = self._key_inputs("import", {"source": src_digest, "name": src.name}, None)
                 jobs.append(([a], label, kin, (steps.task_import, str(self.store.root), str(src))))
         # a record is valid only while the files the import read (.bin, .mtl) are unchanged
         self._run_phase(jobs, accept=lambda call, rec: self._deps_match(Path(call[2]), rec), with_record=_with_deps)

@@ -889,6 +889,8 @@ def encode_scene_output(scene: Scene, models: Mapping[ModelKey, Mapping],
         entry = {"id": mid, "file": f"{mid}.json"}
         if info.get("bounds") is not None:
             entry["bounds"] = info["bounds"]
+        if info.get("positionOffset") is not None:  # recentred: world = matrix . (vertex + offset)
+            entry["positionOffset"] = [float(v) for v in info["positionOffset"]]
         if mid in used and used[mid] != entry:
             raise ValueError(f"model id {mid!r} given twice with different data")
         used[mid] = entry

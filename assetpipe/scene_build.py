@@ -104,7 +104,8 @@ class SceneRun:
         per_mesh = [[l["switchDistance"] or 0.0 for l in m["lods"]] for m in side["meshes"]]
         n = min((len(x) for x in per_mesh), default=1)
         switches = [max(x[k] for x in per_mesh) for k in range(n)] if per_mesh else [0.0]
-        return {"id": spec.id, "switchDistances": switches, "bounds": side["bounds"]}
+        return {"id": spec.id, "switchDistances": switches, "bounds": side["bounds"],
+                "positionOffset": side.get("positionOffset")}
 
     def write_outputs(self, state, store, stat, by_key: dict, jobs: int) -> list[AssetResult]:
         from assetpipe.scene import encode_scene_output

@@ -113,10 +113,15 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
         tris = tris[~off_range]
     if options.drop_degenerate and tris.shape[0]:
         rep = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
+        degenerate += int(rep.sum())
+        tris = tris[~rep]
+    # 6 (first pass, on the source's indices: cheap, and spares the area test, the normals
+    # and the weld the work of a mesh made of copies); the second pass follows the weld
+    tris, duplicates = drop_duplicate_triangles(tris, drop_reversed=double_sided)
+    if options.drop_degenerate and tris.shape[0]:
         area_bad = _zero_area(pos, tris, options.degenerate_area_tolerance)
-        bad = rep | area_bad
-        degenerate += int(bad.sum())
-        tris = tris[~bad]
+        degenerate += int(area_bad.sum())
+        tris = tris[~area_bad]
 
     columns = []
     for name in options.layout:
@@ -138,7 +143,8 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
     if options.weld and n:
         verts, tris, welded = weld_vertices(verts, tris)
 
-    tris, duplicates = drop_duplicate_triangles(tris, drop_reversed=double_sided)
+    tris, welded_duplicates = drop_duplicate_triangles(tris, drop_reversed=double_sided)
+    duplicates += welded_duplicates
 
     if options.optimize and tris.shape[0]:
         verts, tris = optimize_order(verts, tris)
@@ -172,33 +178,47 @@ def float32_resolution(pos32: np.ndarray) -> tuple[float, float]:
 def drop_duplicate_triangles(tris: np.ndarray, drop_reversed: bool = False) -> tuple[np.ndarray, int]:
     """(tris without duplicates, count dropped); the first of each kept, order kept.
 
-    Exact duplicates: the same three vertex indices in the same cyclic order. With
-    ``drop_reversed`` also the opposite cyclic order. Sort-based: O(M log M), vectorised (each
-    triangle becomes one integer key: the rotation starting at its smallest index, packed)."""
+    Exact duplicates: the same three vertex indices in the same cyclic order (from any starting
+    vertex). With ``drop_reversed`` also the opposite cyclic order. Sort-based, vectorised,
+    O(M log M): each triangle becomes one integer key (its sorted indices, packed, and its
+    winding parity); when key and triangle number fit in 63 bits together, one plain sort of
+    the combined integers groups duplicates with the first one leading, else an argsort and
+    the smallest triangle number per group."""
     m = tris.shape[0]
     if m < 2:
         return tris, 0
-    t = np.asarray(tris, dtype=np.int64)
-    first = np.argmin(t, axis=1)
-    rows = np.arange(m)
-    a = t[rows, first]
-    b = t[rows, (first + 1) % 3]
-    c = t[rows, (first + 2) % 3]
-    lo, hi = np.minimum(b, c), np.maximum(b, c)
-    flipped = b > c  # the cyclic order (a, b, c) reads (a, hi, lo): the reversed winding
-    bits = max(int(t.max()).bit_length(), 1)
-    if 3 * bits + 1 <= 63:
-        key = (((a << bits) | lo) << bits | hi)
-        if not drop_reversed:
-            key = (key << 1) | flipped
-        _, keep = np.unique(key, return_index=True)
-    else:  # > 2^20 vertices: rows of (a, lo, hi[, flipped]) instead of one packed integer
-        cols = [a, lo, hi] if drop_reversed else [a, lo, hi, flipped.astype(np.int64)]
-        k = np.ascontiguousarray(np.stack(cols, axis=1))
-        _, keep = np.unique(k.view(np.dtype((np.void, 8 * k.shape[1]))).reshape(m), return_index=True)
+    t0, t1, t2 = (tris[:, k].astype(np.int64) for k in range(3))
+    lo = np.minimum(np.minimum(t0, t1), t2)
+    hi = np.maximum(np.maximum(t0, t1), t2)
+    mid = t0 + t1 + t2 - lo - hi
+    bits = max(int(hi.max()).bit_length(), 1)
+    key = (lo << bits | mid) << bits | hi
+    kbits = 3 * bits
+    if not drop_reversed:
+        # a cyclic order of ascending indices has exactly two ascending steps, a reversed one one
+        flipped = ((t0 < t1).astype(np.int8) + (t1 < t2) + (t2 < t0)) == 1
+        key = key << 1 | flipped
+        kbits += 1
+    ibits = (m - 1).bit_length()
+    if kbits + ibits <= 63:
+        s = np.sort(key << ibits | np.arange(m, dtype=np.int64))
+        k = s >> ibits
+        first = np.empty(m, dtype=bool)
+        first[0] = True
+        np.not_equal(k[1:], k[:-1], out=first[1:])
+        keep = s[first] & ((1 << ibits) - 1)
+    elif kbits <= 63:
+        order = np.argsort(key)
+        k = key[order]
+        starts = np.flatnonzero(np.concatenate(([True], k[1:] != k[:-1])))
+        keep = np.minimum.reduceat(order, starts)
+    else:  # > 2^20 vertices: rows of (lo, mid, hi[, flipped]) instead of one packed integer
+        cols = [lo, mid, hi] if drop_reversed else [lo, mid, hi, flipped.astype(np.int64)]
+        rows = np.ascontiguousarray(np.stack(cols, axis=1))
+        _, keep = np.unique(rows.view(np.dtype((np.void, 8 * rows.shape[1]))).reshape(m), return_index=True)
     if keep.size == m:
         return tris, 0
-    keep.sort()
+    keep = np.sort(keep)
     return tris[keep], int(m - keep.size)
 
 

@@ -127,6 +127,9 @@ class RenderModel:
     notes: list[str] = field(default_factory=list)
     sidecar: dict[str, Any] = field(default_factory=dict)
     root: Path = Path(".")
+    # a recentred model's sidecar positionOffset (float64), already added to ``positions``,
+    # the bounds and the centres: the model is drawn in its source's frame, like the source
+    position_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def lod_count(self) -> int:
@@ -351,6 +354,15 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
         bmax = positions.max(0).astype(np.float64) if len(positions) else np.zeros(3)
     center = np.asarray(b.get("center", (bmin + bmax) / 2), np.float64)
     radius = float(b.get("radius", np.linalg.norm(bmax - bmin) / 2))
+    offset = np.zeros(3)
+    if side.get("positionOffset") is not None:  # a recentred model (docs/FORMAT.md, "Precision")
+        offset = np.asarray(side["positionOffset"], np.float64).reshape(3)
+        if not np.isfinite(offset).all():
+            raise AssetError(model_json, "sidecar positionOffset is not finite")
+        positions = (positions.astype(np.float64) + offset).astype(np.float32)
+        bmin, bmax, center = bmin + offset, bmax + offset, center + offset
+        for m in meshes:
+            m.center = m.center + offset
     return RenderModel(id=str(seed.get("id", model_json.stem)), positions=positions, uvs=uvs, colors=colors,
                        indices=indices, meshes=meshes, materials=materials, bounds_min=bmin, bounds_max=bmax,
-                       center=center, radius=radius, notes=notes, sidecar=side, root=root)
+                       center=center, radius=radius, notes=notes, sidecar=side, root=root, position_offset=offset)
