@@ -214,4 +214,4 @@ def _check_output_size(a, store, limits: BuildLimits) -> None:
             pass  # a vanished blob: materialise says so
     if total > limits.max_output_bytes:
         raise AssetError(None, f"its outputs would take {total / 2**20:.1f} MiB, over the per-model limit of "
-                               f"{limits.max_output_bytes / 2**20:.0f} MiB (--max-output-mb)")
+                               f"{limits.max_output_bytes / 2**20:.4g} MiB (--max-output-mb)")

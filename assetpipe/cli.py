@@ -9,6 +9,7 @@ import click
 
 from assetpipe import __version__
 from assetpipe.core.errors import AssetpipeError
+from assetpipe.build_types import DEFAULT_BUILD_LIMITS
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 from assetpipe.pipelines.lod_options import SIMPLIFIERS
 
@@ -22,7 +23,7 @@ def main() -> None:
 
 
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
-                   lock_border: bool, max_texture_size: int | None):
+                   lock_border: bool, max_texture_size: int | None, recenter: bool = False):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
     import dataclasses
 
@@ -31,6 +32,8 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
     d = DEFAULT_BUILD_OPTIONS
     try:
         mesh = dataclasses.replace(d.mesh, layout=tuple(a.strip() for a in layout.split(",")))
+        if recenter:
+            mesh = dataclasses.replace(mesh, recenter=True)
         lod = None
         if not no_lod:
             changes = {}
@@ -74,18 +77,26 @@ def eval_ratio(text: str) -> float:
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
 @click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
               help="Downsize textures so neither side exceeds this (power of two steps).")
+@click.option("--recenter", is_flag=True,
+              help="Write positions relative to each model's bounding-box centre (the offset goes into the "
+                   "sidecar's positionOffset): keeps float32 precision for models far from their origin.")
+@click.option("--max-output-mb", type=click.FloatRange(min=0, min_open=True),
+              default=DEFAULT_BUILD_LIMITS.max_output_bytes / 2**20, show_default=True,
+              help="Fail a model whose outputs (files and textures) would exceed this many MiB.")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-          simplifier, lock_border, max_texture_size) -> None:
+          simplifier, lock_border, max_texture_size, recenter, max_output_mb) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
     from assetpipe.build import run_build
+    from assetpipe.build_types import BuildLimits
     from assetpipe.progress import Reporter
 
-    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter)
+    limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))
     reporter = Reporter(quiet=quiet, explain=explain)
     try:
         with reporter:
             report = run_build(list(inputs), out_dir, options, jobs=jobs, cache_dir=cache_dir,
-                               on_result=reporter.on_result)
+                               on_result=reporter.on_result, limits=limits)
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
     if json_report:

@@ -76,14 +76,17 @@ def assign_ids(sources: list[Path]) -> dict[Path, str]:
     for p in sources:
         k = (parent[p], p.stem.lower())
         by_folder[k] = by_folder.get(k, 0) + 1
-    name = {p: f"{p.stem}_{p.suffix[1:]}" if by_folder[(parent[p], p.stem.lower())] > 1 else p.stem
+    def safe(text: str) -> str:
+        # [A-Za-z0-9._-] only, never starting or ending with '.' or '_' (so never '', '.', '..'
+        # or a hidden file name)
+        return _UNSAFE.sub("_", text).strip("_.") or "model"
+
+    name = {p: safe(f"{p.stem}_{p.suffix[1:]}" if by_folder[(parent[p], p.stem.lower())] > 1 else p.stem)
             for p in sources}
 
     def candidate(p: Path, depth: int) -> str:
         parts = [*parent[p].parts[len(parent[p].parts) - depth:], name[p]] if depth else [name[p]]
-        # a safe file name: [A-Za-z0-9._-] only, never starting or ending with '.' or '_'
-        # (so never '', '.', '..' or a hidden file)
-        return _UNSAFE.sub("_", "_".join(parts)).strip("_.") or "model"
+        return safe("_".join(parts))
 
     depth = {p: 0 for p in sources}
     while True:

@@ -196,3 +196,152 @@ def test_lod_chain_in_the_built_files(corpus, tmp_path):
     assert np.isfinite(vtx).all()
     assert abs(lods[1]["error"]["hausdorff"] - lods[1]["error"]["hausdorffRel"] * np.linalg.norm(
         np.array(mesh["bounds"]["max"]) - mesh["bounds"]["min"])) < 1e-3 * lods[1]["error"]["hausdorff"] + 1e-9
+
+
+# -- one bad model never crashes the build; nothing outside -o and --cache (#13) -------------
+
+def _cli(*args, env=None):
+    from robust_models import run_cli
+
+    return run_cli(*args, env=env)
+
+
+def _good_and_bad(tmp_path):
+    """good.obj beside three models whose numbers overflow to infinity on the way."""
+    from gltf_builder import GltfBuilder
+    from robust_models import uv_sphere, write_obj
+
+    src = tmp_path / "src"
+    src.mkdir()
+    pos, tris, _ = uv_sphere(8, 4)
+    write_obj(src / "good.obj", pos, tris)
+    (src / "huge.obj").write_text("v 1e308 1e308 1e308\nv -1e308 0 0\nv 0 1 0\nf 1 2 3\n")
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), scale=[1e300, 1e300, 1e300])
+    b.write_gltf(src / "scaled.gltf")
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles([[0, 0, 0], [1, 0, 0], [0, 1, 0]], material=b.add_material(
+        pbrMetallicRoughness={"baseColorFactor": [1e39, 0.5, 0.5, 1.0]})))
+    b.write_gltf(src / "colour.gltf")
+    return src
+
+
+def test_non_finite_numbers_fail_their_model_in_one_line_and_the_rest_builds(tmp_path):
+    src = _good_and_bad(tmp_path)
+    report_path = tmp_path / "r.json"
+    r = _cli("build", src, "-o", tmp_path / "out", "--cache", tmp_path / "c", "--json", report_path)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr + r.stdout and "internal error" not in r.stderr + r.stdout
+    report = {Path(a["source"]).name: a for a in json.loads(report_path.read_text())["assets"]}
+    assert report["good.obj"]["status"] == "built"
+    assert (tmp_path / "out" / "good.json").is_file()
+    for name in ("huge.obj", "scaled.gltf"):
+        a = report[name]
+        assert a["status"] == "failed", a
+        assert "\n" not in a["error"] and str(src / name) in a["error"], a["error"]
+        assert a.get("traceback") is None
+    # a colour of 1e39 is finite in float64 JSON: it is either built or fails in one line
+    assert report["colour.gltf"]["status"] in ("built", "failed")
+    assert report["colour.gltf"].get("traceback") is None
+
+
+def _task_out_of_memory():
+    import numpy as np
+
+    return np.zeros(1 << 62, np.uint8)  # numpy raises MemoryError (_ArrayMemoryError) at once
+
+
+def test_out_of_memory_names_the_input_and_the_step(tmp_path):
+    from assetpipe.cache.stat_cache import StatCache
+    from assetpipe.cache.store import Store
+    from assetpipe.graph import AssetState, Graph
+    from assetpipe.options import DEFAULT_BUILD_OPTIONS
+
+    store = Store(tmp_path / "c")
+    graph = Graph(store, StatCache(tmp_path / "c" / "stat.json"), DEFAULT_BUILD_OPTIONS, {})
+    a = AssetState(source=tmp_path / "big.obj", id="big")
+    graph._run_phase([([a], "mesh", {"step": "mesh", "test": 1}, (_task_out_of_memory,))])
+    assert a.error == f"{tmp_path / 'big.obj'}: step mesh: out of memory in step mesh"
+
+
+def test_nothing_is_written_outside_out_and_cache(tmp_path):
+    """HOME and XDG_CACHE_HOME point at a folder that must stay empty when --cache is given."""
+    import os
+
+    from robust_models import cli_env, make_inputs
+
+    src = make_inputs(tmp_path / "src", n_obj=1, n_gltf=1)
+    home = tmp_path / "home"
+    home.mkdir()
+    env = cli_env(HOME=home, XDG_CACHE_HOME=home / "xdg")
+    env.pop("ASSETPIPE_CACHE", None)
+    r = _cli("build", src, "-o", tmp_path / "out", "--cache", tmp_path / "c", "-j", "2", env=env)
+    assert r.returncode == 0, r.stderr
+    assert list(home.rglob("*")) == [], "the build wrote outside -o and --cache"
+    assert (tmp_path / "c" / "library-versions.json").is_file()
+    assert sorted(os.listdir(tmp_path)) == ["c", "home", "out", "src"]
+
+
+def test_a_link_in_the_output_folder_never_carries_a_write_outside(tmp_path):
+    from robust_models import make_inputs
+
+    src = make_inputs(tmp_path / "src", n_obj=1, n_gltf=1)
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "textures").symlink_to(outside, target_is_directory=True)
+    report_path = tmp_path / "r.json"
+    r = _cli("build", src, "-o", out, "--cache", tmp_path / "c", "--json", report_path)
+    assert r.returncode == 1
+    assert list(outside.iterdir()) == []
+    report = {a["id"]: a for a in json.loads(report_path.read_text())["assets"]}
+    assert report["ball0"]["status"] == "built"  # no texture: nothing to write through the link
+    assert report["tex0"]["status"] == "failed" and "refused" in report["tex0"]["error"]
+    assert "\n" not in report["tex0"]["error"] and report["tex0"].get("traceback") is None
+
+    # the build's own state folder as a link leading out: refused before anything is written
+    out2 = tmp_path / "out2"
+    out2.mkdir()
+    (out2 / ".assetpipe").symlink_to(outside, target_is_directory=True)
+    r = _cli("build", src, "-o", out2, "--cache", tmp_path / "c")
+    assert r.returncode != 0 and "leading out of the output folder" in r.stderr
+    assert list(outside.iterdir()) == []
+
+
+def test_a_restored_state_file_cannot_delete_outside_out(tmp_path):
+    from robust_models import make_inputs
+
+    src = make_inputs(tmp_path / "src", n_obj=1, n_gltf=0)
+    out = tmp_path / "out"
+    assert _cli("build", src, "-o", out, "--cache", tmp_path / "c").returncode == 0
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    absolute = tmp_path / "abs.txt"
+    absolute.write_text("keep me too")
+    state_path = out / ".assetpipe" / "state.json"
+    state = json.loads(state_path.read_text())
+    (entry,) = state["assets"].values()
+    entry["outputs"]["../victim.txt"] = ["xxh3:00", 7, 0]
+    entry["outputs"][str(absolute)] = ["xxh3:00", 11, 0]
+    entry["outputs"]["textures/../../victim.txt"] = ["xxh3:00", 7, 0]
+    state["assets"]["/nowhere/gone.obj"] = {**entry, "id": "gone"}  # a vanished source: its outputs are stale
+    state_path.write_text(json.dumps(state))
+    r = _cli("build", src, "-o", out, "--cache", tmp_path / "c")
+    assert r.returncode == 0, r.stderr
+    assert victim.read_text() == "keep me" and absolute.read_text() == "keep me too"
+
+
+def test_output_size_limit_fails_the_model_in_one_line(tmp_path):
+    from robust_models import make_inputs
+
+    src = make_inputs(tmp_path / "src", n_obj=1, n_gltf=0)
+    report_path = tmp_path / "r.json"
+    r = _cli("build", src, "-o", tmp_path / "out", "--cache", tmp_path / "c", "--max-output-mb", "0.001",
+             "--json", report_path)
+    assert r.returncode == 1
+    (a,) = json.loads(report_path.read_text())["assets"]
+    assert a["status"] == "failed" and "per-model limit of 0 MiB" not in a["error"]
+    assert "over the per-model limit" in a["error"] and "\n" not in a["error"] and str(src / "ball0.obj") in a["error"]
+    assert not (tmp_path / "out" / "ball0.json").exists()
+    assert _cli("build", src, "-o", tmp_path / "out", "--cache", tmp_path / "c").returncode == 0

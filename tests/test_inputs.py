@@ -132,3 +132,19 @@ def test_names_differing_only_in_case_in_one_folder(tmp_path):
         pytest.skip("case-insensitive file system")
     ids = assign_ids(srcs)
     assert ids == dict(zip(srcs, ["Box_gltf_0", "box_gltf_1", "Duck"]))
+
+
+def test_ids_are_safe_file_names_even_for_dot_names(tmp_path):
+    """#13: ``...obj`` was skipped in a folder but given the id ``..`` when named directly."""
+    srcs = _touch(tmp_path, "...obj", "..gltf", ".hidden.obj", "_x_.glb", "a..b.obj")
+    # a folder finds what naming finds (pathlib's suffix rule in both)
+    assert sorted(p.name for p in discover_inputs([tmp_path])) == sorted(p.name for p in srcs)
+    assert [p.name for p in discover_inputs([tmp_path / "...obj"])] == ["...obj"]
+    ids = assign_ids(srcs)
+    assert len({i.lower() for i in ids.values()}) == len(srcs)
+    for i in ids.values():
+        assert re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", i) and not i.endswith(".") and i not in (".", ".."), i
+    assert {ids[srcs[0]], ids[srcs[1]]} == {"model_0", "model_1"}  # stems ".." and ".": nothing safe left
+    assert ids[srcs[2]] == "hidden" and ids[srcs[3]] == "x" and ids[srcs[4]] == "a..b"
+    # a path separator in a stem cannot reach an id either
+    assert "/" not in "".join(assign_ids([tmp_path / "a" / "b.obj"]).values())
