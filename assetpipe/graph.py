@@ -228,7 +228,9 @@ class Graph:
                         a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
                         if status == "internal":
                             a.warnings.append(str(value))
-                    elif status in ("memory", "nonfinite"):
+                    elif status == "memory":
+                        a.error = f"{a.source}: {value}"
+                    elif status == "nonfinite":
                         a.error = f"{a.source}: step {label}: {value}"
                     elif status == "asset":
                         a.error = str(value)

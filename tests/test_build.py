@@ -261,7 +261,7 @@ def test_out_of_memory_names_the_input_and_the_step(tmp_path):
     graph = Graph(store, StatCache(tmp_path / "c" / "stat.json"), DEFAULT_BUILD_OPTIONS, {})
     a = AssetState(source=tmp_path / "big.obj", id="big")
     graph._run_phase([([a], "mesh", {"step": "mesh", "test": 1}, (_task_out_of_memory,))])
-    assert a.error == f"{tmp_path / 'big.obj'}: step mesh: out of memory in step mesh"
+    assert a.error == f"{tmp_path / 'big.obj'}: out of memory in step mesh"
 
 
 def test_nothing_is_written_outside_out_and_cache(tmp_path):
