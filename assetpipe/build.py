@@ -133,7 +133,12 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_resu
     forgotten = state.forget_missing_sources()
     removed = state.delete_unowned_outputs()
     if todo or forgotten or removed or state.touched or scene_run is not None:
-        state.save(explain_steps)
+        try:
+            state.save(explain_steps)
+        except OSError as exc:  # a full disk, a read-only folder: one line, not a traceback
+            from assetpipe.core.errors import ConfigError
+
+            raise ConfigError(f"cannot write the build state in {out_dir}: {exc}") from None
     stat.save()
     return BuildReport(results=results, seconds=time.perf_counter() - t0, removed=removed,
                        cache_dropped=list(store.dropped))
