@@ -201,3 +201,28 @@ def test_a_bad_scene_fails_with_one_line(tmp_path):
     assert len(r.results) == 1 and r.results[0].status == "failed"
     err = r.results[0].error
     assert "bad.json" in err and "object 0" in err and "missing.obj" in err and "\n" not in err
+
+
+def test_a_recentred_model_carries_its_offset_into_the_scene(tmp_path):
+    """#13: with --recenter the scene output gives each model's positionOffset, so an engine
+    places world = matrix . (vertex + offset)."""
+    import dataclasses
+
+    from robust_models import uv_sphere, write_obj
+
+    pos, tris, _ = uv_sphere(16, 8, center=(1e6, 2.5, -3e6))
+    write_obj(tmp_path / "far.obj", pos, tris)
+    scene = write_scene(tmp_path / "s.json", [{"model": {"name": str(tmp_path / "far.obj")},
+                                                "instances": [[{"translation": [1, 0, 0]}]]}])
+    opts = dataclasses.replace(DEFAULT_BUILD_OPTIONS, mesh=dataclasses.replace(DEFAULT_BUILD_OPTIONS.mesh,
+                                                                               recenter=True))
+    r = run_build([scene], tmp_path / "out", opts, cache_dir=tmp_path / "cache")
+    assert not r.failed, [a.error for a in r.failed]
+    side = json.loads((tmp_path / "out/far.asset.json").read_text())
+    center = ((pos.min(0) + pos.max(0)) / 2).tolist()
+    assert side["positionOffset"] == center
+    out = json.loads((tmp_path / "out/s.scene.json").read_text())
+    (model,) = out["models"]
+    assert model["positionOffset"] == center
+    # the written positions are local: within the sphere's radius of 0
+    assert max(abs(v) for v in side["bounds"]["max"] + side["bounds"]["min"]) <= 1.0 + 1e-6
