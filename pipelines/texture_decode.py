@@ -59,13 +59,20 @@ def _png_ihdr(data: bytes) -> tuple[int, int, int, int] | None:
     return width, height, depth, colour_type
 
 
-def _check_size(image: ImageSource, width: int, height: int, max_pixels: int) -> None:
+def _check_size(image: ImageSource, width: int, height: int, max_pixels: int, bytes_per_channel: int = 1) -> None:
+    """The one limit on decoded images, checked from the header before any pixel is decoded:
+    the RGBA pixels must fit in ``max_pixels`` RGBA8 texels (4 bytes each), so a 16-bit image
+    (8 bytes per texel) may have half as many pixels. Pillow's own bomb limit never applies
+    (it would refuse a real 16384x16384 PNG that ours accepts)."""
     if width <= 0 or height <= 0:
         raise InvalidTextureError(_where(image), f"image {image.name!r} has an empty size {width}x{height}")
-    if width * height > max_pixels:
+    decoded = width * height * 4 * bytes_per_channel
+    if decoded > max_pixels * 4:
+        depth = f" {8 * bytes_per_channel}-bit" if bytes_per_channel > 1 else ""
         raise InvalidTextureError(
             _where(image),
-            f"image {image.name!r} is {width}x{height} = {width * height} pixels, over the limit of {max_pixels}")
+            f"image {image.name!r} is {width}x{height}{depth} = {decoded // (1 << 20)} MiB decoded as RGBA, over the "
+            f"limit of {max_pixels * 4 // (1 << 20)} MiB ({max_pixels} RGBA8 texels; checked before decoding)")
 
 
 def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
@@ -80,7 +87,7 @@ def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
     if arr.dtype != np.uint16:  # OpenCV chose 8 bits after all: widen exactly
         arr = arr.astype(np.uint16) * 257
     h, w = arr.shape[:2]
-    _check_size(image, w, h, max_pixels)
+    _check_size(image, w, h, max_pixels, 2)
     out = np.empty((h, w, 4), dtype=np.uint16)
     if arr.ndim == 2:
         out[..., :3] = arr[..., None]
@@ -106,14 +113,16 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
     (see the module docstring). EXIF orientation is ignored.
 
     Raises :class:`InvalidTextureError` (naming ``image.origin``) when the bytes are not a
-    decodable image of an accepted format, are truncated, or hold more than ``max_pixels``
-    pixels (checked from the header, before the pixels are decoded: a decompression bomb is
-    refused without allocating its pixels).
+    decodable image of an accepted format, are truncated, or decode to more than
+    ``max_pixels`` RGBA8 texels' worth of memory (4 bytes each; a 16-bit PNG counts 8 bytes a
+    texel). The size is checked from the header, before the pixels are decoded: a
+    decompression bomb is refused without allocating its pixels, on the OpenCV (16-bit PNG)
+    path too, and Pillow's own bomb limit never refuses an image ours accepts.
     """
     data = image.data
     ihdr = _png_ihdr(data)
     if ihdr is not None:
-        _check_size(image, ihdr[0], ihdr[1], max_pixels)
+        _check_size(image, ihdr[0], ihdr[1], max_pixels, 2 if ihdr[2] == 16 else 1)
         if ihdr[2] == 16:
             return _decode_png16(image, max_pixels)
     formats = _PIL_FORMAT_HINT.get(image.mime)
@@ -121,7 +130,13 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
         with warnings.catch_warnings():
             # Our own max_pixels bound replaces Pillow's global bomb check.
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            im = Image.open(io.BytesIO(data), formats=formats)
+            # ...and Pillow's bomb *error* (at twice its limit) must not fire below ours
+            saved = Image.MAX_IMAGE_PIXELS
+            Image.MAX_IMAGE_PIXELS = max(saved or 0, max_pixels)
+            try:
+                im = Image.open(io.BytesIO(data), formats=formats)
+            finally:
+                Image.MAX_IMAGE_PIXELS = saved
             if im.format not in _ACCEPTED_FORMATS:
                 raise InvalidTextureError(_where(image), f"image {image.name!r} is a {im.format} image, not a supported format")
             _check_size(image, im.width, im.height, max_pixels)
