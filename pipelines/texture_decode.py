@@ -71,8 +71,12 @@ def _check_size(image: ImageSource, width: int, height: int, max_pixels: int, by
         depth = f" {8 * bytes_per_channel}-bit" if bytes_per_channel > 1 else ""
         raise InvalidTextureError(
             _where(image),
-            f"image {image.name!r} is {width}x{height}{depth} = {decoded // (1 << 20)} MiB decoded as RGBA, over the "
-            f"limit of {max_pixels * 4 // (1 << 20)} MiB ({max_pixels} RGBA8 texels; checked before decoding)")
+            f"image {image.name!r} is {width}x{height}{depth} = {width * height} pixels, {_mib(decoded)} decoded as RGBA: "
+            f"over the limit of {max_pixels} RGBA8 texels ({_mib(max_pixels * 4)}; checked before decoding)")
+
+
+def _mib(n: int) -> str:
+    return f"{n / (1 << 20):.1f} MiB" if n >= 1 << 20 else f"{n} bytes"
 
 
 def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
