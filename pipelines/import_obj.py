@@ -86,7 +86,10 @@ def _read_normalised(path: Path, what: str, warnings: list[str] | None = None) -
 
     UTF-8 (BOM stripped) stays as it is, UTF-16 with a BOM is re-encoded as UTF-8; tabs and
     other blanks become spaces; ``\\`` continuations are joined, followed by as many empty
-    lines as were joined, so line numbers still match the file.
+    lines as were joined, so line numbers still match the file. A few lines holding binary
+    bytes (NUL and other control characters) are blanked with a warning naming them (as
+    tinyobjloader and Assimp skip a bad line); a file that is mostly such lines is refused as
+    binary (see :func:`_skip_binary_lines`).
     """
     try:
         raw = path.read_bytes()
@@ -106,7 +109,7 @@ def _read_normalised(path: Path, what: str, warnings: list[str] | None = None) -
     data = raw
     if b"\r" in data:
         data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    if b"\x00" in data:
+    if len(data.translate(None, _BINARY_BYTES)) != len(data):
         data = _skip_binary_lines(data, path, what, warnings)
     if b"\t" in data or b"\v" in data or b"\f" in data:
         data = data.translate(_BLANKS)
@@ -121,14 +124,23 @@ _BLANKS = bytes.maketrans(b"\t\v\f", b"   ")
 _MAX_BINARY_LINES = 16
 
 
+# control bytes no text file holds (C0 controls but tab, newline, vertical tab, form feed, CR)
+_BINARY_BYTES = bytes(b for b in range(32) if b not in (9, 10, 11, 12, 13)) + b"\x7f"
+
+
 def _skip_binary_lines(data: bytes, path: Path, what: str, warnings: list[str] | None) -> bytes:
-    """Blank the lines of ``data`` that hold NUL bytes, or refuse the file as binary."""
+    """Blank the lines of ``data`` that hold control bytes, or refuse the file as binary: when
+    they are more than ``_MAX_BINARY_LINES`` lines and 1% of the lines, half of the lines, or
+    10% of the bytes."""
     buf = np.frombuffer(data, np.uint8)
-    nul = np.flatnonzero(buf == 0)
+    binary = np.zeros(256, bool)
+    binary[np.frombuffer(_BINARY_BYTES, np.uint8)] = True
+    junk = np.flatnonzero(binary[buf])
     nl = np.flatnonzero(buf == _NL)
     total_lines = nl.size + (0 if data.endswith(b"\n") else 1)
-    bad = np.unique(np.searchsorted(nl, nul))  # line of each NUL (newlines before it)
-    refuse = nul.size * 10 > buf.size or (bad.size > _MAX_BINARY_LINES and bad.size * 100 > total_lines)
+    bad = np.unique(np.searchsorted(nl, junk))  # line of each control byte (newlines before it)
+    refuse = (junk.size * 10 > buf.size or bad.size * 2 >= total_lines
+              or (bad.size > _MAX_BINARY_LINES and bad.size * 100 > total_lines))
     if refuse or warnings is None:
         raise AssetError(path, f"is a binary file, not a text {what} file (or UTF-16 without a byte-order mark)")
     out = buf.copy()
@@ -1139,7 +1151,7 @@ def _load_materials(mtllibs: list[tuple[int, str]], ctx: _Context) -> tuple[list
             seen.add(found)
             if warning:
                 ctx.warnings.append(warning)
-            data = _read_normalised(found, "MTL")
+            data = _read_normalised(found, "MTL", ctx.warnings)
             ctx.read_dep(found)
             for mat_name, statements in _parse_mtl(data, found, ctx.warnings):
                 if mat_name in index:
