@@ -74,13 +74,20 @@ def eval_ratio(text: str) -> float:
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
 @click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
               help="Downsize textures so neither side exceeds this (power of two steps).")
+@click.option("--max-image-pixels", type=click.IntRange(1, None), default=_D.texture.max_pixels, show_default=True,
+              help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
+                   "double), checked from its header before decoding.")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-          simplifier, lock_border, max_texture_size) -> None:
+          simplifier, lock_border, max_texture_size, max_image_pixels) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
+    import dataclasses
+
     from assetpipe.build import run_build
     from assetpipe.progress import Reporter
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+    if max_image_pixels != options.texture.max_pixels:
+        options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     reporter = Reporter(quiet=quiet, explain=explain)
     try:
         with reporter:
