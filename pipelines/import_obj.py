@@ -434,7 +434,8 @@ def _parse_geometry(lines: _Lines, path: Path, warnings: list[str],
     if has_color.any():
         # "x y z r g b" (6 values) or "x y z r g b a"-style 7 values: the last is ignored.
         colors = np.ones((positions.shape[0], 4), np.float32)
-        colors[has_color, :3] = vmat[has_color, 3:6]
+        with np.errstate(over="ignore"):  # a colour beyond float32 becomes inf: refused just below
+            colors[has_color, :3] = vmat[has_color, 3:6]
         if not np.isfinite(colors).all():
             k = int(np.argmin(np.isfinite(colors).all(axis=1)))
             raise InvalidGeometryError(path, f"vertex {k + 1} (line {v_lines[k] + 1}) has a non-finite colour")

@@ -17,7 +17,8 @@ files with generated headers, chunks and (in)valid pixel streams, through
 
 Outcomes per case: ``built`` (imported with no warning), ``warning``, ``error`` (one
 :class:`AssetError` line naming the file), and the failures ``internal`` (any other exception,
-or an error message of several lines or naming no file), ``timeout`` and ``memory``. For a
+or an error message of several lines or naming no file), ``timeout``, ``memory`` and
+``pywarning`` (a Python warning such as numpy's RuntimeWarning, which adds lines to the output). For a
 slice of cases the real ``assetpipe build`` runs on a folder with the bad model beside a good
 one: ``build-ok`` when it exits 0 or 1 with the good model built and no internal error.
 """
@@ -38,6 +39,7 @@ import subprocess
 import sys
 import tempfile
 import traceback
+import warnings as warnings_module
 import zlib
 from pathlib import Path
 
@@ -51,7 +53,7 @@ from hypothesis import strategies as st  # noqa: E402
 from assetpipe.core.errors import AssetError  # noqa: E402
 from gltf_builder import GltfBuilder  # noqa: E402
 
-FAILURES = ("internal", "timeout", "memory")
+FAILURES = ("internal", "timeout", "memory", "pywarning")
 CASE_SECONDS = 20  # a case's time limit (every legitimate case here takes well under a second)
 ADDRESS_SPACE = 6 << 30  # the fuzzing process's address-space limit (numpy/OpenCV map ~1.5 GB at start)
 
@@ -181,7 +183,7 @@ def _mutate_doc(draw, doc: dict) -> dict:
         if op == "delete":
             del parent[key]
         elif op == "replace":
-            parent[key] = draw(_VALUES)
+            parent[key] = copy.deepcopy(draw(_VALUES))  # the pool's lists and dicts are shared
         elif op == "negate" and isinstance(parent[key], (int, float)) and not isinstance(parent[key], bool):
             parent[key] = -parent[key] - 1
         elif op == "grow" and isinstance(parent[key], int) and not isinstance(parent[key], bool):
@@ -330,10 +332,20 @@ def classify(fn, model: Path) -> tuple[str, str]:
     """(outcome, detail) of ``fn()``; see the module docstring."""
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(CASE_SECONDS)
+    caught = warnings_module.catch_warnings(record=True)
     try:
-        result = fn()
+        with caught as seen:
+            warnings_module.simplefilter("always")
+            result = fn()
+        # a Python warning (numpy's RuntimeWarning, ...) would add lines to the build's output
+        if seen:
+            return "pywarning", "; ".join(f"{w.category.__name__}: {w.message} ({w.filename}:{w.lineno})"
+                                          for w in seen[:3])
     except AssetError as exc:
         text = str(exc)
+        if seen:
+            return "pywarning", f"{text} + " + "; ".join(f"{w.category.__name__}: {w.message} ({w.filename}:{w.lineno})"
+                                                     for w in seen[:3])
         if "\n" in text or exc.path is None:
             return "internal", f"AssetError not one line naming a file: {text[:300]!r}"
         return "error", text
@@ -345,7 +357,7 @@ def classify(fn, model: Path) -> tuple[str, str]:
         return "internal", f"{type(exc).__name__}: {str(exc)[:200]}\n{traceback.format_exc(limit=-4)}"
     finally:
         signal.alarm(0)
-    warnings = getattr(result, "warnings", ())
+    warnings = getattr(result, "warnings", ())  # the model's own warnings: an expected outcome
     return ("warning" if warnings else "built"), "; ".join(warnings)[:300]
 
 
