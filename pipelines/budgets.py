@@ -22,10 +22,11 @@ GIB = 1024 ** 3
 class InputBudgets:
     """What one model may declare.
 
-    ``max_model_bytes``: the decoded geometry of a model, estimated from the declared
-    accessor counts (glTF: every attribute and index array as the float64/int64 arrays the
-    importer makes, times the number of times its mesh is placed by the node hierarchy; OBJ:
-    the parsing arrays, about 40 bytes per input byte, see :mod:`pipelines.import_obj`).
+    ``max_model_bytes``: the decoded geometry of a glTF model, estimated from the declared
+    accessor counts: every attribute, morph target and index array as the 8-byte-per-value
+    arrays the importer makes, times the number of times its mesh is placed by the node
+    hierarchy. (An OBJ declares nothing up front: its size is its text, parsed in chunks of
+    lines so the parsing temporaries stay bounded; :mod:`pipelines.import_obj`.)
     ``max_placements``: meshes placed by glTF nodes (a hierarchy sharing subtrees multiplies
     them; counted without walking the paths).
     ``max_triangles``: triangles of a model after triangulation, counted before they are made.
