@@ -79,8 +79,61 @@ def _mib(n: int) -> str:
     return f"{n / (1 << 20):.1f} MiB" if n >= 1 << 20 else f"{n} bytes"
 
 
+_PNG_CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}  # colour types allowed at 16 bits
+
+
+def _check_png16_stream(image: ImageSource) -> None:
+    """Check a 16-bit PNG's chunks (CRCs) and pixel stream (inflates to exactly the size its
+    header implies) before OpenCV sees it: libpng prints its complaints about a broken file to
+    stderr, which would add lines to the build's one-line error. Inflates in 1 MiB pieces, so
+    the check keeps no more than that."""
+    import zlib
+
+    data = image.data
+    width, height, _, colour = struct.unpack(">IIBB", data[16:26])
+    interlace = data[28]
+    if colour not in _PNG_CHANNELS or interlace not in (0, 1) or data[26] != 0 or data[27] != 0:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid 16-bit PNG header")
+    pos, inflater, inflated, ended = 8, zlib.decompressobj(), 0, False
+    try:
+        while pos + 12 <= len(data):
+            length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+            body = data[pos + 8:pos + 8 + length]
+            if len(body) != length or pos + 12 + length > len(data):
+                break
+            crc = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])[0]
+            if zlib.crc32(kind + body) != crc:
+                raise InvalidTextureError(_where(image), f"image {image.name!r} has a corrupt {kind!r} chunk (CRC)")
+            if kind == b"IDAT":
+                chunk = inflater.decompress(body, 1 << 20)
+                while True:
+                    inflated += len(chunk)
+                    if not inflater.unconsumed_tail:
+                        break
+                    chunk = inflater.decompress(inflater.unconsumed_tail, 1 << 20)
+            elif kind == b"IEND":
+                ended = True
+                break
+            pos += 12 + length
+    except zlib.error as exc:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt 16-bit PNG ({exc})") from None
+    row = 2 * _PNG_CHANNELS[colour]
+    if interlace:  # Adam7: seven passes, each of its own rows and columns
+        passes = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+        expected = 0
+        for x0, y0, dx, dy in passes:
+            w, h = (width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy
+            if w > 0 and h > 0:
+                expected += h * (1 + w * row)
+    else:
+        expected = height * (1 + width * row)
+    if not ended or not inflater.eof or inflated != expected:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated 16-bit PNG")
+
+
 def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
     """A 16-bit PNG via OpenCV (IMREAD_UNCHANGED keeps 16 bits and ignores EXIF)."""
+    _check_png16_stream(image)
     buf = np.frombuffer(image.data, dtype=np.uint8)
     try:
         arr = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)

@@ -243,3 +243,18 @@ def test_pillows_bomb_limit_never_refuses_what_ours_accepts(monkeypatch):
     data = pil_bytes(Image.new("RGBA", (64, 64), (1, 2, 3, 4)), "PNG")
     assert decode_image(source(data)).shape == (64, 64, 4)
     assert Image.MAX_IMAGE_PIXELS == 100  # restored after use
+
+
+def test_a_corrupt_16bit_png_is_one_line_with_nothing_on_stderr(capfd):
+    # libpng (through OpenCV) printed "libpng error: IDAT: incorrect data check" and the like to
+    # stderr: extra lines beside the one-line error. The stream is checked before OpenCV sees it.
+    good = _zero_png(8, 8, 16)
+    assert decode_image(source(good)).shape == (8, 8, 4)
+    idat = good.index(b"IDAT")
+    broken = bytearray(good)
+    broken[idat + 6] ^= 0xFF  # inside the zlib stream: the CRC no longer matches
+    truncated = raw_png(8, 8, 16, 6, bytes(1 + 8 * 8)[:20])  # valid CRCs, too little pixel data
+    for data, words in ((bytes(broken), "corrupt b'IDAT' chunk"), (truncated, "corrupt or truncated 16-bit PNG")):
+        with pytest.raises(InvalidTextureError, match=words):
+            decode_image(source(data))
+    assert capfd.readouterr().err == ""
