@@ -79,21 +79,24 @@ def _mib(n: int) -> str:
     return f"{n / (1 << 20):.1f} MiB" if n >= 1 << 20 else f"{n} bytes"
 
 
-_PNG_CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}  # colour types allowed at 16 bits
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # samples per pixel by colour type
+_PNG_DEPTHS = {0: (1, 2, 4, 8, 16), 2: (8, 16), 3: (1, 2, 4, 8), 4: (8, 16), 6: (8, 16)}
 
 
-def _check_png16_stream(image: ImageSource) -> None:
-    """Check a 16-bit PNG's chunks (CRCs) and pixel stream (inflates to exactly the size its
-    header implies) before OpenCV sees it: libpng prints its complaints about a broken file to
-    stderr, which would add lines to the build's one-line error. Inflates in 1 MiB pieces, so
-    the check keeps no more than that."""
+def _check_png_stream(image: ImageSource) -> None:
+    """Check a PNG's chunks (CRCs) and pixel stream (inflates to exactly the size its header
+    implies) before a decoder sees it. A header claiming 16384^2 pixels over a few bytes of
+    data is refused without allocating the image (Pillow allocates first), and libpng never
+    prints its complaints about a broken file to stderr beside our one-line error. Inflates in
+    1 MiB pieces, so the check keeps no more than that."""
     import zlib
 
     data = image.data
-    width, height, _, colour = struct.unpack(">IIBB", data[16:26])
+    width, height, depth, colour = struct.unpack(">IIBB", data[16:26])
     interlace = data[28]
-    if colour not in _PNG_CHANNELS or interlace not in (0, 1) or data[26] != 0 or data[27] != 0:
-        raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid 16-bit PNG header")
+    if depth not in _PNG_DEPTHS.get(colour, ()) or interlace not in (0, 1) or data[26] != 0 or data[27] != 0:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid PNG header "
+                                                 f"(bit depth {depth}, colour type {colour})")
     pos, inflater, inflated, ended = 8, zlib.decompressobj(), 0, False
     try:
         while pos + 12 <= len(data):
@@ -117,23 +120,23 @@ def _check_png16_stream(image: ImageSource) -> None:
             pos += 12 + length
     except zlib.error as exc:
         raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt 16-bit PNG ({exc})") from None
-    row = 2 * _PNG_CHANNELS[colour]
+    bits = depth * _PNG_CHANNELS[colour]  # per pixel
     if interlace:  # Adam7: seven passes, each of its own rows and columns
         passes = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
         expected = 0
         for x0, y0, dx, dy in passes:
             w, h = (width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy
             if w > 0 and h > 0:
-                expected += h * (1 + w * row)
+                expected += h * (1 + (w * bits + 7) // 8)
     else:
-        expected = height * (1 + width * row)
-    if not ended or not inflater.eof or inflated != expected:
-        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated 16-bit PNG")
+        expected = height * (1 + (width * bits + 7) // 8)
+    if not ended or not inflater.eof or inflated < expected:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated PNG "
+                                                 f"(its pixel data holds {inflated} of {expected} bytes)")
 
 
 def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
     """A 16-bit PNG via OpenCV (IMREAD_UNCHANGED keeps 16 bits and ignores EXIF)."""
-    _check_png16_stream(image)
     buf = np.frombuffer(image.data, dtype=np.uint8)
     try:
         arr = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
@@ -180,6 +183,7 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
     ihdr = _png_ihdr(data)
     if ihdr is not None:
         _check_size(image, ihdr[0], ihdr[1], max_pixels, 2 if ihdr[2] == 16 else 1)
+        _check_png_stream(image)
         if ihdr[2] == 16:
             return _decode_png16(image, max_pixels)
     formats = _PIL_FORMAT_HINT.get(image.mime)
