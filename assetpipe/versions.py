@@ -4,7 +4,7 @@ Bump a step's version when its output changes for the same inputs and options: i
 that step's cache key, so every cached result of the old version is rebuilt.
 """
 
-IMPORT = 2  # 2: geometry-only blob
+IMPORT = 3  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate and repeated OBJ faces dropped (#13)
 MESH = 2  # 2: non-finite UVs cleaned before tangents are derived
 LOD = 3  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack
 TEXTURE = 1
@@ -16,7 +16,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 
 
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-          "point-cloud-utils", "fast-simplification")
+          "point-cloud-utils", "fast-simplification", "mapbox_earcut")
 _cached: dict | None = None
 
 
