@@ -1,6 +1,6 @@
 """A long fuzzing run of the importers and the image decoder (issue #13).
 
-    .venv/bin/python benchmarks/fuzz.py [--cases 3000] [--seed 0] [--builds 30] [--report fuzz.json]
+    .venv/bin/python benchmarks/fuzz.py [--quick] [--cases 3000] [--seed 0] [--builds 30] [--report fuzz.json]
 
 Runs ``tests/fuzz_inputs.py`` (hypothesis-generated and mutated glTF/GLB, OBJ+MTL and PNG
 inputs, a third each) in a subprocess that limits its own address space and every case's
@@ -32,7 +32,10 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--builds", type=int, default=30)
     ap.add_argument("--report", type=Path, default=None)
+    ap.add_argument("--quick", action="store_true", help="the CI size: 300 cases, 3 builds")
     args = ap.parse_args()
+    if args.quick:
+        args.cases, args.builds = 300, 3
     cmd = [sys.executable, str(ROOT / "tests" / "fuzz_inputs.py"), "--cases", str(args.cases),
            "--seed", str(args.seed), "--builds", str(args.builds)]
     if args.report:
