@@ -97,7 +97,7 @@ def _check_png_stream(image: ImageSource) -> None:
     if depth not in _PNG_DEPTHS.get(colour, ()) or interlace not in (0, 1) or data[26] != 0 or data[27] != 0:
         raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid PNG header "
                                                  f"(bit depth {depth}, colour type {colour})")
-    pos, inflater, inflated, ended = 8, zlib.decompressobj(), 0, False
+    pos, inflater, inflated = 8, zlib.decompressobj(), 0
     try:
         while pos + 12 <= len(data):
             length, kind = struct.unpack(">I4s", data[pos:pos + 8])
@@ -115,7 +115,6 @@ def _check_png_stream(image: ImageSource) -> None:
                         break
                     chunk = inflater.decompress(inflater.unconsumed_tail, 1 << 20)
             elif kind == b"IEND":
-                ended = True
                 break
             pos += 12 + length
     except zlib.error as exc:
@@ -130,7 +129,9 @@ def _check_png_stream(image: ImageSource) -> None:
                 expected += h * (1 + (w * bits + 7) // 8)
     else:
         expected = height * (1 + (width * bits + 7) // 8)
-    if not ended or not inflater.eof or inflated < expected:
+    # Only missing pixel data is refused: a stream lacking its zlib checksum or a file lacking
+    # IEND after complete pixel data still decodes (Pillow and libpng accept them).
+    if inflated < expected:
         raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated PNG "
                                                  f"(its pixel data holds {inflated} of {expected} bytes)")
 
