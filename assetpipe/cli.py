@@ -83,14 +83,21 @@ def eval_ratio(text: str) -> float:
 @click.option("--max-output-mb", type=click.FloatRange(min=0, min_open=True),
               default=DEFAULT_BUILD_LIMITS.max_output_bytes / 2**20, show_default=True,
               help="Fail a model whose outputs (files and textures) would exceed this many MiB.")
+@click.option("--max-image-pixels", type=click.IntRange(1, None), default=_D.texture.max_pixels, show_default=True,
+              help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
+                   "double), checked from its header before decoding.")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-          simplifier, lock_border, max_texture_size, recenter, max_output_mb) -> None:
+          simplifier, lock_border, max_texture_size, recenter, max_output_mb, max_image_pixels) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
+    import dataclasses
+
     from assetpipe.build import run_build
     from assetpipe.build_types import BuildLimits
     from assetpipe.progress import Reporter
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter)
+    if max_image_pixels != options.texture.max_pixels:
+        options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))
     reporter = Reporter(quiet=quiet, explain=explain)
     try:

@@ -15,6 +15,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from assetpipe.core.errors import AssetError, MissingFileError, UnsupportedError
+from assetpipe.pipelines.budgets import DEFAULT_INPUT_BUDGETS, describe_bytes
 from assetpipe.pipelines.image_source import resolve_inside
 
 COMPONENT_DTYPES = {
@@ -39,10 +40,29 @@ def decode_data_uri(uri: str, source: Path, what: str) -> bytes:
         raise AssetError(source, f"{what}: only base64 data URIs are supported")
     if len(payload) * 3 // 4 > MAX_DATA_URI_BYTES:
         raise AssetError(source, f"{what}: data URI larger than {MAX_DATA_URI_BYTES} bytes")
+    payload = "".join(payload.split())  # line breaks inside a data URI are tolerated
     try:
-        return base64.b64decode(payload, validate=False)
+        return base64.b64decode(payload, validate=True)
     except (binascii.Error, ValueError) as exc:
         raise AssetError(source, f"{what}: invalid base64 data URI ({exc})") from None
+
+
+def uri_scheme(uri: str) -> str | None:
+    """The scheme of a URI other than ``data:`` (``file``, ``http``, ...), or None for a relative
+    path. A Windows drive letter (``C:``) counts as a scheme too: both are refused."""
+    head = uri.split("/", 1)[0]
+    if ":" in head:
+        return head.split(":", 1)[0].lower()
+    return None
+
+
+def check_uri(uri: str, source: Path, what: str) -> None:
+    """Refuse a URI with a scheme (``file://``, ``http://``, ``C:``): the one policy for buffers
+    and images alike is that a model reads only relative paths inside its folder and data URIs."""
+    scheme = uri_scheme(uri)
+    if scheme is not None and scheme != "data":
+        raise UnsupportedError(source, f"{what}: refuses the URI {uri[:80]!r}: only relative paths inside the "
+                                       "model's folder and data: URIs are read")
 
 
 def data_uri_mime(uri: str) -> str | None:
@@ -58,7 +78,8 @@ class AccessorReader:
     Files read (external buffers) are recorded in ``self.dependencies``.
     """
 
-    def __init__(self, gltf, source: Path, glb_blob: bytes | None):
+    def __init__(self, gltf, source: Path, glb_blob: bytes | None, max_bytes: int = DEFAULT_INPUT_BUDGETS.max_model_bytes):
+        self.max_bytes = max_bytes
         self.gltf = gltf
         self.source = source
         self.base_dir = source.parent
@@ -83,6 +104,7 @@ class AccessorReader:
         elif uri.startswith("data:"):
             data = decode_data_uri(uri, self.source, f"buffer {index}")
         else:
+            check_uri(uri, self.source, f"buffer {index}")
             path = resolve_inside(self.base_dir, unquote(uri), self.source)
             if not path.is_file():
                 raise MissingFileError(self.source, f"buffer {index}: file {uri!r} not found")
@@ -120,10 +142,21 @@ class AccessorReader:
     def _decode_meshopt(self, index: int, ext: dict) -> bytes:
         import meshoptimizer
 
+        if not isinstance(ext, dict) or not all(
+                isinstance(ext.get(k, 0), int) and not isinstance(ext.get(k, 0), bool) and ext.get(k, 0) >= 0
+                for k in ("buffer", "byteOffset", "byteLength", "count", "byteStride")) or \
+                not all(k in ext for k in ("buffer", "byteLength", "count", "byteStride")):
+            raise AssetError(self.source, f"bufferView {index}: EXT_meshopt_compression needs non-negative integer "
+                                          "buffer, byteLength, count and byteStride")
         buf = self.buffer(ext["buffer"])
         start = ext.get("byteOffset", 0)
+        if start + ext["byteLength"] > len(buf):
+            raise AssetError(self.source, f"bufferView {index}: EXT_meshopt_compression data runs past the end of buffer {ext['buffer']}")
         src = bytes(buf[start:start + ext["byteLength"]])
         count, stride = int(ext["count"]), int(ext["byteStride"])
+        if count * max(stride, 1) > self.max_bytes:
+            raise AssetError(self.source, f"bufferView {index}: EXT_meshopt_compression declares {count} x {stride} "
+                                          f"bytes, over the model's memory budget of {describe_bytes(self.max_bytes)}")
         mode, filt = ext.get("mode", "ATTRIBUTES"), ext.get("filter", "NONE")
         try:
             if mode == "ATTRIBUTES":
@@ -158,25 +191,38 @@ class AccessorReader:
         return out.tobytes()
 
     # -- accessors ----------------------------------------------------------------------
-    def accessor(self, index: int, *, as_float: bool = True) -> np.ndarray:
-        """Accessor ``index`` as an array of shape (count, components) (or (count,) for scalars).
-
-        ``as_float``: float64 with normalized integers mapped to [0,1]/[-1,1] as the spec says;
-        otherwise the raw integer dtype (for indices and joints).
-        """
+    def info(self, index: int) -> tuple[np.dtype, int, int]:
+        """(component dtype, components, count) of accessor ``index`` as declared, checked."""
         accessors = self.gltf.accessors or []
-        if not 0 <= index < len(accessors):
+        if not isinstance(index, int) or not 0 <= index < len(accessors):
             raise AssetError(self.source, f"accessor {index} does not exist")
         acc = accessors[index]
         if acc.componentType not in COMPONENT_DTYPES:
             raise AssetError(self.source, f"accessor {index} has unknown componentType {acc.componentType}")
         if acc.type not in TYPE_COMPONENTS:
             raise AssetError(self.source, f"accessor {index} has unknown type {acc.type!r}")
-        dtype = COMPONENT_DTYPES[acc.componentType]
-        ncomp = TYPE_COMPONENTS[acc.type]
-        count = int(acc.count)
+        return COMPONENT_DTYPES[acc.componentType], TYPE_COMPONENTS[acc.type], int(acc.count)
+
+    def decoded_bytes(self, index: int) -> int:
+        """Bytes accessor ``index`` takes once decoded (float64 or int64 elements): from the
+        declared count, before anything is read."""
+        _, ncomp, count = self.info(index)
+        return count * ncomp * 8
+
+    def accessor(self, index: int, *, as_float: bool = True) -> np.ndarray:
+        """Accessor ``index`` as an array of shape (count, components) (or (count,) for scalars).
+
+        ``as_float``: float64 with normalized integers mapped to [0,1]/[-1,1] as the spec says;
+        otherwise the raw integer dtype (for indices and joints).
+        """
+        dtype, ncomp, count = self.info(index)
+        acc = self.gltf.accessors[index]
         if count < 0:
             raise AssetError(self.source, f"accessor {index} has a negative count")
+        if count * ncomp * 8 > self.max_bytes:
+            raise AssetError(self.source, f"accessor {index} declares {count} x {ncomp} values "
+                                          f"({describe_bytes(count * ncomp * 8)} decoded), over the model's memory "
+                                          f"budget of {describe_bytes(self.max_bytes)}")
         if acc.bufferView is None:
             arr = np.zeros((count, ncomp), dtype=dtype)
         else:

@@ -13,6 +13,7 @@ clear line instead of an exception deep inside the importer.
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 RAW_KEYS = frozenset({"extensions", "extras"})
@@ -70,6 +71,63 @@ _SCHEMA: dict[str, dict[str, tuple]] = {
 _PRIMITIVE = {"attributes": (_OBJ,), "indices": (_INT,), "material": (_INT,), "mode": (_INT,), "targets": (_LIST,)}
 _REQUIRED = {"accessors": ("componentType", "count", "type"), "bufferViews": ("buffer", "byteLength"),
              "buffers": ("byteLength",), "meshes": ("primitives",)}
+# integer properties that are offsets, sizes, counts or indices: never negative
+_NON_NEGATIVE = frozenset({"bufferView", "byteOffset", "count", "buffer", "byteLength", "byteStride", "mesh",
+                           "skin", "sampler", "source", "indices", "material", "mode", "scene"})
+# node transform arrays: exact length, numbers only
+_NODE_VECTORS = {"matrix": 16, "rotation": 4, "scale": 3, "translation": 3}
+
+
+class JsonError(ValueError):
+    """The bytes are not standard JSON (message: the phrase to report)."""
+
+
+def _reject_constant(name: str):
+    raise JsonError(f"has the non-standard JSON number {name} (glTF JSON allows finite numbers only)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if value - value != 0.0:  # inf (1e400 overflows to inf when read)
+        raise JsonError(f"has the number {text[:40]} in its JSON, which overflows a double")
+    return value
+
+
+def load_json(text: str) -> Any:
+    """``json.loads`` for glTF: NaN/Infinity tokens and numbers overflowing a double are
+    refused (Python's json accepts them), and nesting too deep to read is a :class:`JsonError`
+    instead of a RecursionError."""
+    try:
+        return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+    except RecursionError:
+        raise JsonError("nests its JSON deeper than can be read (more than about 1000 levels)") from None
+    except json.JSONDecodeError as exc:
+        raise JsonError(f"is not valid glTF JSON ({exc})") from None
+
+
+def _ints_ok(value: Any) -> bool:
+    return isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in value)
+
+
+def _numbers_ok(value: Any, length: int) -> bool:
+    return isinstance(value, list) and len(value) == length and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+
+
+def _check_sparse(i: int, sparse: dict) -> str | None:
+    count = sparse.get("count")
+    if not isinstance(count, int) or isinstance(count, bool) or count < 1:
+        return f"accessors[{i}].sparse.count is not a positive integer"
+    for part, keys in (("indices", ("bufferView", "componentType")), ("values", ("bufferView",))):
+        sub = sparse.get(part)
+        if not isinstance(sub, dict):
+            return f"accessors[{i}].sparse.{part} is not an object"
+        for key in keys + ("byteOffset",):
+            v = sub.get(key)
+            if (v is None and key == "byteOffset") or (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+                continue
+            return f"accessors[{i}].sparse.{part}.{key} is missing or not a non-negative integer"
+    return None
 
 
 def _type_ok(value: Any, types: tuple) -> bool:
@@ -95,11 +153,25 @@ def check_structure(doc: dict) -> str | None:
             if not isinstance(item, dict):
                 return f"{array}[{i}] is not an object"
             for key in _REQUIRED.get(array, ()):
-                if key not in item:
-                    return f"{array}[{i}] has no '{key}'"
+                if item.get(key) is None:
+                    return f"{array}[{i}] has no '{key}'" if key not in item else f"{array}[{i}].{key} is null"
             for key, types in props.items():
                 if not _type_ok(item.get(key), types):
                     return f"{array}[{i}].{key} has the wrong type ({type(item[key]).__name__})"
+                if key in _NON_NEGATIVE and isinstance(item.get(key), int) and item[key] < 0:
+                    return f"{array}[{i}].{key} is negative ({item[key]})"
+            if array == "accessors" and item.get("sparse") is not None:
+                problem = _check_sparse(i, item["sparse"])
+                if problem:
+                    return problem
+            if array == "nodes":
+                if item.get("children") is not None and not _ints_ok(item["children"]):
+                    return f"nodes[{i}].children is not a list of node indices"
+                for key, length in _NODE_VECTORS.items():
+                    if item.get(key) is not None and not _numbers_ok(item[key], length):
+                        return f"nodes[{i}].{key} is not {length} numbers"
+            if array == "scenes" and item.get("nodes") is not None and not _ints_ok(item["nodes"]):
+                return f"scenes[{i}].nodes is not a list of node indices"
             if array == "meshes":
                 for j, prim in enumerate(item["primitives"]):
                     if not isinstance(prim, dict):
@@ -107,6 +179,16 @@ def check_structure(doc: dict) -> str | None:
                     for key, types in _PRIMITIVE.items():
                         if not _type_ok(prim.get(key), types):
                             return f"meshes[{i}].primitives[{j}].{key} has the wrong type"
+                        if key in _NON_NEGATIVE and isinstance(prim.get(key), int) and prim[key] < 0:
+                            return f"meshes[{i}].primitives[{j}].{key} is negative ({prim[key]})"
+                    attributes = prim.get("attributes") or {}
+                    for name, acc in attributes.items():
+                        if not isinstance(acc, int) or isinstance(acc, bool) or acc < 0:
+                            return f"meshes[{i}].primitives[{j}].attributes.{name} is not an accessor index"
+                    for t, target in enumerate(prim.get("targets") or []):
+                        if not isinstance(target, dict) or not all(
+                                isinstance(a, int) and not isinstance(a, bool) and a >= 0 for a in target.values()):
+                            return f"meshes[{i}].primitives[{j}].targets[{t}] is not an object of accessor indices"
     for key, types in (("scene", (_INT,)), ("extensionsRequired", (_LIST,)), ("extensionsUsed", (_LIST,)),
                        ("animations", (_LIST,))):
         if not _type_ok(doc.get(key), types):

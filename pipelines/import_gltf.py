@@ -12,7 +12,6 @@ morph targets (default weights applied), animations.
 
 from __future__ import annotations
 
-import json
 import math
 import struct
 from dataclasses import dataclass
@@ -22,8 +21,9 @@ from urllib.parse import unquote
 import numpy as np
 
 from assetpipe.core.errors import AssetError, InvalidGeometryError, UnsupportedError
-from assetpipe.pipelines.gltf_document import GltfObject, check_structure
-from assetpipe.pipelines.gltf_accessors import AccessorReader, data_uri_mime, decode_data_uri
+from assetpipe.pipelines.gltf_document import GltfObject, JsonError, check_structure, load_json
+from assetpipe.pipelines.budgets import DEFAULT_INPUT_BUDGETS, InputBudgets, describe_bytes
+from assetpipe.pipelines.gltf_accessors import COMPONENT_DTYPES, AccessorReader, check_uri, data_uri_mime, decode_data_uri
 from assetpipe.pipelines.image_source import image_from_bytes, read_image_file, resolve_inside
 from assetpipe.pipelines.model import ImageSource, ImportedModel, Material, MeshData, Sampler, TextureRef
 
@@ -38,7 +38,6 @@ SUPPORTED_EXTENSIONS = frozenset({
 
 MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP", 4: "TRIANGLES",
               5: "TRIANGLE_STRIP", 6: "TRIANGLE_FAN"}
-MAX_PLACEMENTS = 1_000_000  # meshes placed by nodes; guards against DAG blow-up
 GLB_MAGIC = b"glTF"
 
 
@@ -60,10 +59,11 @@ def _parse(path: Path):
     else:
         json_bytes = data
     try:
-        text = json_bytes.decode("utf-8-sig")
-        doc = json.loads(text)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc = load_json(json_bytes.decode("utf-8-sig"))
+    except UnicodeDecodeError as exc:
         raise AssetError(path, f"is not valid glTF JSON ({exc})") from None
+    except JsonError as exc:
+        raise AssetError(path, str(exc)) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("asset"), dict):
         raise AssetError(path, "is not a glTF document (no 'asset' object)")
     version = str(doc["asset"].get("version", ""))
@@ -171,9 +171,16 @@ class _Ctx:
     warnings: list[str]
     images: dict[int, ImageSource | None]
     image_deps: list[Path]
+    budgets: InputBudgets = DEFAULT_INPUT_BUDGETS
 
 
-def import_gltf(path: Path) -> ImportedModel:
+def import_gltf(path: Path, budgets: InputBudgets = DEFAULT_INPUT_BUDGETS) -> ImportedModel:
+    """Import a .gltf or .glb file.
+
+    Before any accessor is decoded, the node hierarchy's placements and the declared sizes of
+    every accessor a placed mesh uses are checked against ``budgets`` (see
+    :mod:`pipelines.budgets`); a model over them is refused with one line.
+    """
     path = Path(path)
     gltf, blob = _parse(path)
     required = set(gltf.extensionsRequired or [])
@@ -181,8 +188,9 @@ def import_gltf(path: Path) -> ImportedModel:
     if unsupported:
         raise UnsupportedError(path, f"requires extension{'s' if len(unsupported) > 1 else ''} "
                                      f"{', '.join(unsupported)}, which assetpipe cannot decode")
-    ctx = _Ctx(path, gltf, AccessorReader(gltf, path, blob), [], {}, [])
+    ctx = _Ctx(path, gltf, AccessorReader(gltf, path, blob, budgets.max_model_bytes), [], {}, [], budgets)
 
+    _check_budgets(ctx)
     materials, uv_transforms = _materials(ctx)
     meshes = _flatten(ctx, uv_transforms)
 
@@ -202,6 +210,104 @@ def _scene_roots(gltf) -> list[int]:
         return list(gltf.scenes[scene].nodes or [])
     children = {c for n in nodes for c in (n.children or [])}
     return [i for i in range(len(nodes)) if i not in children]
+
+
+_ATTRIBUTE_TYPES = {"POSITION": ("VEC3",), "NORMAL": ("VEC3",), "TANGENT": ("VEC4",),
+                    "TEXCOORD_0": ("VEC2",), "TEXCOORD_1": ("VEC2",), "COLOR_0": ("VEC3", "VEC4")}
+_INDEX_TYPES = frozenset({5121, 5123, 5125})
+
+
+def _placements(ctx: _Ctx) -> tuple[dict[int, int], int]:
+    """How many times each mesh is placed, and how many node visits the flattening makes.
+
+    Counted over the DAG (paths from the scene roots, by dynamic programming in topological
+    order) without walking the paths, so 24 levels of shared subtrees (2^24 placements) are
+    counted in microseconds. Raises for a cycle or a child that does not exist.
+    """
+    gltf = ctx.gltf
+    nodes = gltf.nodes or []
+    roots = _scene_roots(gltf)
+    if not gltf.scenes and nodes and not roots:
+        raise AssetError(ctx.source, "node hierarchy has a cycle: every node is another node's child")
+    cap = ctx.budgets.max_placements + 1  # counts saturate here: big enough to refuse, never huge
+    paths = [0] * len(nodes)
+    for r in roots:
+        if not 0 <= r < len(nodes):
+            raise AssetError(ctx.source, f"node {r} does not exist")
+        paths[r] = min(cap, paths[r] + 1)
+    # reachable nodes and their in-degrees (edges counted with multiplicity)
+    indeg = [0] * len(nodes)
+    reached = set(roots)
+    todo = list(dict.fromkeys(roots))
+    while todo:
+        ni = todo.pop()
+        for c in nodes[ni].children or []:
+            if not 0 <= c < len(nodes):
+                raise AssetError(ctx.source, f"node {c} does not exist")
+            indeg[c] += 1
+            if c not in reached:
+                reached.add(c)
+                todo.append(c)
+    ready = [r for r in dict.fromkeys(roots) if indeg[r] == 0]
+    done = 0
+    visits = 0
+    per_mesh: dict[int, int] = {}
+    while ready:
+        ni = ready.pop()
+        done += 1
+        visits = min(cap, visits + paths[ni])
+        node = nodes[ni]
+        if node.mesh is not None:
+            per_mesh[node.mesh] = min(cap, per_mesh.get(node.mesh, 0) + paths[ni])
+        for c in node.children or []:
+            paths[c] = min(cap, paths[c] + paths[ni])
+            indeg[c] -= 1
+            if indeg[c] == 0:
+                ready.append(c)
+    if done < len(reached):
+        stuck = min(i for i in reached if indeg[i] > 0)
+        raise AssetError(ctx.source, f"node hierarchy has a cycle: node {stuck} is its own ancestor")
+    return per_mesh, visits
+
+
+def _check_budgets(ctx: _Ctx) -> None:
+    """Refuse a model whose declared geometry is over the budgets, before decoding any of it."""
+    b = ctx.budgets
+    per_mesh, visits = _placements(ctx)
+    if visits > b.max_placements:
+        raise AssetError(ctx.source, f"node hierarchy places more than {b.max_placements} nodes "
+                                     "(shared subtrees?): over the placement budget")
+    meshes = ctx.gltf.meshes or []
+    total_bytes = total_tris = 0
+    for mi, placed in sorted(per_mesh.items()):
+        if not 0 <= mi < len(meshes):
+            raise AssetError(ctx.source, f"node references mesh {mi}, which does not exist")
+        for pi, prim in enumerate(meshes[mi].primitives or []):
+            where = f"mesh {mi} primitive {pi}"
+            accs = [a for a in (prim.get("attributes") or {}).values()]
+            for target in prim.get("targets") or []:
+                accs.extend(target.values())
+            size = 0
+            for a in accs:
+                size += ctx.reader.decoded_bytes(a)
+            vertices = 0
+            position = (prim.get("attributes") or {}).get("POSITION")
+            if position is not None:
+                vertices = ctx.reader.info(position)[2]
+            if prim.get("indices") is not None:
+                size += ctx.reader.decoded_bytes(prim.get("indices"))
+                corners = ctx.reader.info(prim.get("indices"))[2]
+            else:
+                corners = vertices
+            total_bytes += size * placed
+            total_tris += (corners // 3 if prim.get("mode") in (None, 4) else max(corners - 2, 0)) * placed
+            if total_bytes > b.max_model_bytes:
+                raise AssetError(ctx.source, f"{where}: the declared accessors, placed {placed} time(s), need "
+                                             f"{describe_bytes(total_bytes)} or more decoded: over the model's "
+                                             f"memory budget of {describe_bytes(b.max_model_bytes)}")
+            if total_tris > b.max_triangles:
+                raise AssetError(ctx.source, f"{where}: the model declares {total_tris} triangles or more: "
+                                             f"over the triangle budget of {b.max_triangles}")
 
 
 def _flatten(ctx: _Ctx, uv_transforms: dict[int, tuple[int, np.ndarray]]) -> list[MeshData]:
@@ -224,10 +330,11 @@ def _flatten(ctx: _Ctx, uv_transforms: dict[int, tuple[int, np.ndarray]]) -> lis
         if ni in ancestors:
             raise AssetError(ctx.source, f"node hierarchy has a cycle: node {ni} is its own ancestor")
         visits += 1
-        if visits > MAX_PLACEMENTS:
-            raise AssetError(ctx.source, f"node hierarchy places more than {MAX_PLACEMENTS} nodes (shared subtrees?)")
+        if visits > ctx.budgets.max_placements:  # _check_budgets counted them already: never true
+            raise AssetError(ctx.source, f"node hierarchy places more than {ctx.budgets.max_placements} nodes")
         node = nodes[ni]
-        world = parent @ node_matrix(node)
+        with np.errstate(over="ignore", invalid="ignore"):
+            world = parent @ node_matrix(node)
         if node.mesh is not None:
             if node.skin is not None and not skin_warned:
                 ctx.warnings.append("skin dropped: skinned meshes are built in their bind pose")
@@ -249,8 +356,11 @@ def _place_mesh(ctx, node, mesh_index: int, placement: int, world: np.ndarray,
     mesh = gltf.meshes[mesh_index]
     out = []
     lin = world[:3, :3]
-    det = float(np.linalg.det(lin))
-    normal_m = np.linalg.inv(lin).T if abs(det) > 1e-300 else lin
+    if not np.isfinite(world).all():
+        raise InvalidGeometryError(ctx.source, f"mesh {mesh_index}: its node transform overflows to infinity or NaN")
+    with np.errstate(all="ignore"):
+        det = float(np.linalg.det(lin))
+        normal_m = np.linalg.inv(lin).T if 1e-300 < abs(det) < 1e300 else lin
     weights = getattr(node, "weights", None)
     if weights is None:
         weights = getattr(mesh, "weights", None)
@@ -263,23 +373,31 @@ def _place_mesh(ctx, node, mesh_index: int, placement: int, world: np.ndarray,
         if d is None:
             continue
         pos, tris, attrs = d
-        pos_w = pos @ lin.T + world[:3, 3]
-        if not np.isfinite(pos_w).all():
-            raise InvalidGeometryError(ctx.source, f"mesh {mesh_index} primitive {pi}: positions overflow to infinity under the node transforms")
+        with np.errstate(all="ignore"):
+            pos_w = pos @ lin.T + world[:3, 3]
+            big = ~(np.abs(pos_w) <= ctx.budgets.max_coordinate).all(axis=1)  # NaN counts as too big
+        if big.any():
+            raise InvalidGeometryError(
+                ctx.source, f"mesh {mesh_index} primitive {pi}: {int(big.sum())} of {big.size} positions are "
+                            f"non-finite or beyond +-{ctx.budgets.max_coordinate:g} under the node transforms "
+                            f"(float32 arithmetic on them would overflow)")
         if det < 0:  # mirrored: keep front faces front
             tris = tris[:, [0, 2, 1]]
         normals = attrs.get("normals")
-        if normals is not None:
-            n = normals @ normal_m.T
-            norm = np.linalg.norm(n, axis=1, keepdims=True)
-            normals = (n / np.where(norm > 0, norm, 1.0)).astype(np.float32)
-        tangents = attrs.get("tangents")
-        if tangents is not None:
-            t = tangents[:, :3] @ lin.T
-            norm = np.linalg.norm(t, axis=1, keepdims=True)
-            t = t / np.where(norm > 0, norm, 1.0)
-            w = tangents[:, 3:4] * (-1.0 if det < 0 else 1.0)
-            tangents = np.hstack([t, w]).astype(np.float32)
+        with np.errstate(all="ignore"):  # a huge or tiny node scale: non-finite results become 0
+            if normals is not None:
+                n = normals @ normal_m.T
+                norm = np.linalg.norm(n, axis=1, keepdims=True)
+                ok = np.isfinite(norm) & (norm > 0)
+                normals = np.where(ok, n / np.where(ok, norm, 1.0), 0.0).astype(np.float32)
+            tangents = attrs.get("tangents")
+            if tangents is not None:
+                t = tangents[:, :3] @ lin.T
+                norm = np.linalg.norm(t, axis=1, keepdims=True)
+                ok = np.isfinite(norm) & (norm > 0)
+                t = np.where(ok, t / np.where(ok, norm, 1.0), 0.0)
+                w = tangents[:, 3:4] * (-1.0 if det < 0 else 1.0)
+                tangents = np.hstack([t, w]).astype(np.float32)
         name = f"mesh-{mesh_index}-{pi}" + (f"-n{placement}" if placement else "")
         out.append(MeshData(
             name=name, positions=pos_w, indices=tris,
@@ -306,6 +424,17 @@ def _decode_primitive(ctx, mi: int, pi: int, prim, weights, uv_transforms):
         if get("POSITION") is None:
             ctx.warnings.append(f"{where}: no POSITION attribute, skipped")
             return None
+        for name, types in _ATTRIBUTE_TYPES.items():
+            if get(name) is not None and ctx.gltf.accessors[get(name)].type not in types:
+                raise AssetError(ctx.source, f"{where}: attribute {name} is a {ctx.gltf.accessors[get(name)].type} "
+                                             f"accessor, not {' or '.join(types)}")
+        if prim.indices is not None:
+            ctx.reader.info(prim.indices)
+            acc = ctx.gltf.accessors[prim.indices]
+            if acc.type != "SCALAR" or acc.componentType not in _INDEX_TYPES:
+                raise AssetError(ctx.source, f"{where}: indices accessor {prim.indices} is {acc.type} of "
+                                             f"{COMPONENT_DTYPES[acc.componentType].name}, not SCALAR unsigned "
+                                             "byte, short or int")
         pos = ctx.reader.accessor(get("POSITION"))
         flat_idx = None if prim.indices is None else ctx.reader.accessor(prim.indices, as_float=False)
         raw = {}
@@ -327,8 +456,11 @@ def _decode_primitive(ctx, mi: int, pi: int, prim, weights, uv_transforms):
         w = list(weights or [])
         for ti, target in enumerate(prim.targets):
             t_pos = target.get("POSITION") if isinstance(target, dict) else getattr(target, "POSITION", None)
-            if ti < len(w) and w[ti] and t_pos is not None:
-                pos = pos + float(w[ti]) * ctx.reader.accessor(t_pos)
+            if ti < len(w) and isinstance(w[ti], (int, float)) and w[ti] and t_pos is not None:
+                if ctx.reader.info(t_pos)[1:] != (3, n):
+                    raise AssetError(ctx.source, f"{where}: morph target {ti} POSITION is not VEC3 with {n} elements")
+                with np.errstate(all="ignore"):  # overflow is caught by the coordinate check
+                    pos = pos + float(w[ti]) * ctx.reader.accessor(t_pos)
         ctx.warnings.append(f"{where}: {len(prim.targets)} morph target(s) dropped (default weights applied)")
 
     if flat_idx is None:
@@ -485,29 +617,28 @@ def _image(ctx: _Ctx, index: int, where: str) -> ImageSource | None:
     else:
         img = gltf.images[index]
         label = f"{ctx.source.stem}#image{index}"
-        try:
-            if img.uri is not None and img.uri.startswith("data:"):
-                data = decode_data_uri(img.uri, ctx.source, f"image {index}")
-                result = image_from_bytes(data, img.name or label, f"{ctx.source}#images[{index}]", ctx.source,
-                                          declared_mime=data_uri_mime(img.uri))
-            elif img.uri is not None:
-                rel = unquote(img.uri)
-                p = resolve_inside(ctx.source.parent, rel, ctx.source)
-                if not p.is_file():
-                    ctx.warnings.append(f"{where}: image {rel!r} not found; texture ignored")
-                else:
-                    result = read_image_file(p, ctx.source)
-                    ctx.image_deps.append(p)
-            elif img.bufferView is not None:
-                data = bytes(ctx.reader.buffer_view(img.bufferView))
-                result = image_from_bytes(data, img.name or label, f"{ctx.source}#images[{index}]", ctx.source,
-                                          declared_mime=img.mimeType)
+        # One policy for references (docs/BUILD.md, "Missing and broken references"): a file
+        # that is absent is a warning (the texture is dropped; buffers are required, so a
+        # missing .bin is an error); a reference that is refused (outside the folder, a URI
+        # scheme) or data that is present but broken (bad base64, not an image) is an error.
+        if img.uri is not None and img.uri.startswith("data:"):
+            data = decode_data_uri(img.uri, ctx.source, f"image {index}")
+            result = image_from_bytes(data, img.name or label, f"{ctx.source}#images[{index}]", ctx.source,
+                                      declared_mime=data_uri_mime(img.uri))
+        elif img.uri is not None:
+            check_uri(img.uri, ctx.source, f"image {index}")
+            rel = unquote(img.uri)
+            p = resolve_inside(ctx.source.parent, rel, ctx.source)
+            if not p.is_file():
+                ctx.warnings.append(f"{where}: image {rel!r} not found; texture ignored")
             else:
-                ctx.warnings.append(f"{where}: image {index} has neither uri nor bufferView; texture ignored")
-        except AssetError as exc:
-            if "outside the model's folder" in exc.problem:
-                raise
-            ctx.warnings.append(f"{where}: {exc.problem}; texture ignored")
-            result = None
+                result = read_image_file(p, ctx.source)
+                ctx.image_deps.append(p)
+        elif img.bufferView is not None:
+            data = bytes(ctx.reader.buffer_view(img.bufferView))
+            result = image_from_bytes(data, img.name or label, f"{ctx.source}#images[{index}]", ctx.source,
+                                      declared_mime=img.mimeType)
+        else:
+            ctx.warnings.append(f"{where}: image {index} has neither uri nor bufferView; texture ignored")
     ctx.images[index] = result
     return result

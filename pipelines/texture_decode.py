@@ -59,13 +59,81 @@ def _png_ihdr(data: bytes) -> tuple[int, int, int, int] | None:
     return width, height, depth, colour_type
 
 
-def _check_size(image: ImageSource, width: int, height: int, max_pixels: int) -> None:
+def _check_size(image: ImageSource, width: int, height: int, max_pixels: int, bytes_per_channel: int = 1) -> None:
+    """The one limit on decoded images, checked from the header before any pixel is decoded:
+    the RGBA pixels must fit in ``max_pixels`` RGBA8 texels (4 bytes each), so a 16-bit image
+    (8 bytes per texel) may have half as many pixels. Pillow's own bomb limit never applies
+    (it would refuse a real 16384x16384 PNG that ours accepts)."""
     if width <= 0 or height <= 0:
         raise InvalidTextureError(_where(image), f"image {image.name!r} has an empty size {width}x{height}")
-    if width * height > max_pixels:
+    decoded = width * height * 4 * bytes_per_channel
+    if decoded > max_pixels * 4:
+        depth = f" {8 * bytes_per_channel}-bit" if bytes_per_channel > 1 else ""
         raise InvalidTextureError(
             _where(image),
-            f"image {image.name!r} is {width}x{height} = {width * height} pixels, over the limit of {max_pixels}")
+            f"image {image.name!r} is {width}x{height}{depth} = {width * height} pixels, {_mib(decoded)} decoded as RGBA: "
+            f"over the limit of {max_pixels} RGBA8 texels ({_mib(max_pixels * 4)}; checked before decoding)")
+
+
+def _mib(n: int) -> str:
+    return f"{n / (1 << 20):.1f} MiB" if n >= 1 << 20 else f"{n} bytes"
+
+
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # samples per pixel by colour type
+_PNG_DEPTHS = {0: (1, 2, 4, 8, 16), 2: (8, 16), 3: (1, 2, 4, 8), 4: (8, 16), 6: (8, 16)}
+
+
+def _check_png_stream(image: ImageSource) -> None:
+    """Check a PNG's chunks (CRCs) and pixel stream (inflates to exactly the size its header
+    implies) before a decoder sees it. A header claiming 16384^2 pixels over a few bytes of
+    data is refused without allocating the image (Pillow allocates first), and libpng never
+    prints its complaints about a broken file to stderr beside our one-line error. Inflates in
+    1 MiB pieces, so the check keeps no more than that."""
+    import zlib
+
+    data = image.data
+    width, height, depth, colour = struct.unpack(">IIBB", data[16:26])
+    interlace = data[28]
+    if depth not in _PNG_DEPTHS.get(colour, ()) or interlace not in (0, 1) or data[26] != 0 or data[27] != 0:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid PNG header "
+                                                 f"(bit depth {depth}, colour type {colour})")
+    pos, inflater, inflated = 8, zlib.decompressobj(), 0
+    try:
+        while pos + 12 <= len(data):
+            length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+            body = data[pos + 8:pos + 8 + length]
+            if len(body) != length or pos + 12 + length > len(data):
+                break
+            crc = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])[0]
+            if zlib.crc32(kind + body) != crc:
+                raise InvalidTextureError(_where(image), f"image {image.name!r} has a corrupt {kind!r} chunk (CRC)")
+            if kind == b"IDAT":
+                chunk = inflater.decompress(body, 1 << 20)
+                while True:
+                    inflated += len(chunk)
+                    if not inflater.unconsumed_tail:
+                        break
+                    chunk = inflater.decompress(inflater.unconsumed_tail, 1 << 20)
+            elif kind == b"IEND":
+                break
+            pos += 12 + length
+    except zlib.error as exc:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt 16-bit PNG ({exc})") from None
+    bits = depth * _PNG_CHANNELS[colour]  # per pixel
+    if interlace:  # Adam7: seven passes, each of its own rows and columns
+        passes = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
+        expected = 0
+        for x0, y0, dx, dy in passes:
+            w, h = (width - x0 + dx - 1) // dx, (height - y0 + dy - 1) // dy
+            if w > 0 and h > 0:
+                expected += h * (1 + (w * bits + 7) // 8)
+    else:
+        expected = height * (1 + (width * bits + 7) // 8)
+    # Only missing pixel data is refused: a stream lacking its zlib checksum or a file lacking
+    # IEND after complete pixel data still decodes (Pillow and libpng accept them).
+    if inflated < expected:
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt or truncated PNG "
+                                                 f"(its pixel data holds {inflated} of {expected} bytes)")
 
 
 def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
@@ -80,7 +148,7 @@ def _decode_png16(image: ImageSource, max_pixels: int) -> np.ndarray:
     if arr.dtype != np.uint16:  # OpenCV chose 8 bits after all: widen exactly
         arr = arr.astype(np.uint16) * 257
     h, w = arr.shape[:2]
-    _check_size(image, w, h, max_pixels)
+    _check_size(image, w, h, max_pixels, 2)
     out = np.empty((h, w, 4), dtype=np.uint16)
     if arr.ndim == 2:
         out[..., :3] = arr[..., None]
@@ -106,14 +174,17 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
     (see the module docstring). EXIF orientation is ignored.
 
     Raises :class:`InvalidTextureError` (naming ``image.origin``) when the bytes are not a
-    decodable image of an accepted format, are truncated, or hold more than ``max_pixels``
-    pixels (checked from the header, before the pixels are decoded: a decompression bomb is
-    refused without allocating its pixels).
+    decodable image of an accepted format, are truncated, or decode to more than
+    ``max_pixels`` RGBA8 texels' worth of memory (4 bytes each; a 16-bit PNG counts 8 bytes a
+    texel). The size is checked from the header, before the pixels are decoded: a
+    decompression bomb is refused without allocating its pixels, on the OpenCV (16-bit PNG)
+    path too, and Pillow's own bomb limit never refuses an image ours accepts.
     """
     data = image.data
     ihdr = _png_ihdr(data)
     if ihdr is not None:
-        _check_size(image, ihdr[0], ihdr[1], max_pixels)
+        _check_size(image, ihdr[0], ihdr[1], max_pixels, 2 if ihdr[2] == 16 else 1)
+        _check_png_stream(image)
         if ihdr[2] == 16:
             return _decode_png16(image, max_pixels)
     formats = _PIL_FORMAT_HINT.get(image.mime)
@@ -121,7 +192,13 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
         with warnings.catch_warnings():
             # Our own max_pixels bound replaces Pillow's global bomb check.
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            im = Image.open(io.BytesIO(data), formats=formats)
+            # ...and Pillow's bomb *error* (at twice its limit) must not fire below ours
+            saved = Image.MAX_IMAGE_PIXELS
+            Image.MAX_IMAGE_PIXELS = max(saved or 0, max_pixels)
+            try:
+                im = Image.open(io.BytesIO(data), formats=formats)
+            finally:
+                Image.MAX_IMAGE_PIXELS = saved
             if im.format not in _ACCEPTED_FORMATS:
                 raise InvalidTextureError(_where(image), f"image {image.name!r} is a {im.format} image, not a supported format")
             _check_size(image, im.width, im.height, max_pixels)

@@ -800,3 +800,178 @@ def test_corpus_draco_engine(corpus):
     assert [m.name for m in model.meshes] == [m.name for m in plain.meshes]
     for m in model.meshes:
         assert m.indices.size == 0 or int(m.indices.max()) < m.vertex_count
+
+
+# -- hostile input (#13): every finding reproduced, each a clear one-line AssetError --------------
+
+def _tri_doc(tmp_path: Path, **node) -> tuple[GltfBuilder, Path]:
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(TRI, [0, 1, 2]), **node)
+    return b, b.write_gltf(tmp_path / "m.gltf")
+
+
+def _edit(path: Path, edit) -> Path:
+    doc = json.loads(path.read_text())
+    edit(doc)
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _one_line(err) -> str:
+    text = str(err.value)
+    assert "\n" not in text and text.startswith(str(err.value.path))
+    return text
+
+
+@pytest.mark.parametrize("token", ["NaN", "Infinity", "-Infinity", "1e400"])
+def test_non_standard_or_overflowing_json_numbers_are_refused(tmp_path, token):
+    # Python's json accepts NaN/Infinity (and reads 1e400 as inf); the build then crashed writing JSON.
+    _, path = _tri_doc(tmp_path)
+    path.write_text(path.read_text().replace('"version": "2.0"', f'"version": "2.0", "x": {token}'))
+    with pytest.raises(AssetError, match=r"m\.gltf: has (the non-standard JSON number|the number 1e400)") as err:
+        import_gltf(path)
+    _one_line(err)
+
+
+@pytest.mark.parametrize("array,key,value,phrase", [
+    ("accessors", "byteOffset", -4, r"accessors\[0\]\.byteOffset is negative \(-4\)"),
+    ("bufferViews", "byteOffset", -4, r"bufferViews\[0\]\.byteOffset is negative"),
+    ("bufferViews", "buffer", None, r"bufferViews\[0\]\.buffer is null"),
+    ("accessors", "count", None, r"accessors\[0\]\.count is null"),
+    ("accessors", "count", -1, r"accessors\[0\]\.count is negative"),
+])
+def test_negative_or_null_structure_values_are_asset_errors(tmp_path, array, key, value, phrase):
+    # were "internal error" (ValueError: offset must be non-negative; TypeError on None)
+    _, path = _tri_doc(tmp_path)
+    _edit(path, lambda d: d[array][0].__setitem__(key, value))
+    with pytest.raises(AssetError, match=phrase) as err:
+        import_gltf(path)
+    _one_line(err)
+
+
+def test_normal_on_a_vec2_accessor_and_float_vec3_indices_are_asset_errors(tmp_path):
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(TRI, [0, 1, 2], NORMAL=np.zeros((3, 2), np.float32)))
+    with pytest.raises(AssetError, match="attribute NORMAL is a VEC2 accessor, not VEC3"):
+        build(b, tmp_path)
+    _, path = _tri_doc(tmp_path)
+    _edit(path, lambda d: d["meshes"][0]["primitives"][0].__setitem__("indices", 0))  # POSITION, float VEC3
+    with pytest.raises(AssetError, match="indices accessor 0 is VEC3 of float32, not SCALAR unsigned"):
+        import_gltf(path)
+
+
+def test_deeply_nested_extras_is_an_asset_error_not_a_recursion_error(tmp_path):
+    _, path = _tri_doc(tmp_path)
+    path.write_text(path.read_text().rstrip()[:-1] + ', "extras": ' + "[" * 200_000 + "]" * 200_000 + "}")
+    with pytest.raises(AssetError, match="nests its JSON deeper than can be read") as err:
+        import_gltf(path)
+    _one_line(err)
+
+
+def test_bad_base64_buffer_says_so(tmp_path):
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(TRI, [0, 1, 2]))
+    path = b.write_gltf(tmp_path / "m.gltf", embed=True)
+    _edit(path, lambda d: d["buffers"][0].__setitem__("uri", "data:application/octet-stream;base64,@@@###"))
+    with pytest.raises(AssetError, match="buffer 0: invalid base64 data URI"):  # was "buffer 0 has 0 bytes"
+        import_gltf(path)
+
+
+@pytest.mark.parametrize("node,found", [
+    ({"scale": [1e300, 1e300, 1e300]}, "positions are non-finite or beyond"),
+    ({"translation": [1e19, 0, 0]}, "3 of 3 positions are non-finite or beyond"),
+])
+def test_positions_overflowing_float32_under_the_transforms_are_refused(tmp_path, recwarn, node, found):
+    # scale 1e300 overflowed to inf and crashed the build in canonical_json (traceback, exit 1)
+    _, path = _tri_doc(tmp_path, **node)
+    with pytest.raises(InvalidGeometryError, match=found) as err:
+        import_gltf(path)
+    _one_line(err)
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]  # no extra lines from numpy
+
+
+def test_one_position_at_3e38_is_refused_not_built_empty(tmp_path):
+    # a valid float32 whose differences overflow: every triangle became "degenerate", model built empty
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(np.array([[3e38, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), [0, 1, 2]))
+    with pytest.raises(InvalidGeometryError, match=r"1 of 3 positions are non-finite or beyond \+-1e\+18"):
+        build(b, tmp_path)
+
+
+def test_huge_declared_accessors_are_refused_before_allocating(tmp_path):
+    # an accessor without a bufferView is zeros: 3e7 VEC3 built with 6.3 GB peak; 1e9 indices
+    # allocated 7.8 GB before "out of memory". Both are refused from the declared counts.
+    import resource
+    import time
+
+    _, path = _tri_doc(tmp_path)
+    _edit(path, lambda d: d["accessors"].__setitem__(0, {"componentType": 5126, "count": 30_000_000, "type": "VEC3"}))
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    with pytest.raises(AssetError, match=r"need 686\.6 MiB or more decoded: over the model's memory budget of 512\.0 MiB"):
+        import_gltf(path)
+    _, path = _tri_doc(tmp_path)
+    _edit(path, lambda d: d["accessors"].__setitem__(1, {"componentType": 5125, "count": 1_000_000_000, "type": "SCALAR"}))
+    with pytest.raises(AssetError, match=r"need 7\.5 GiB or more decoded"):
+        import_gltf(path)
+    elapsed = time.perf_counter() - t0
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    # nothing near the declared sizes was allocated (the smaller one alone is 687 MiB decoded)
+    assert grown_mb < 100, grown_mb
+    assert elapsed < 5, elapsed  # was 20 s; the checks read only the JSON
+
+
+def test_budgets_are_configurable(tmp_path):
+    from assetpipe.pipelines.budgets import InputBudgets
+
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(QUAD, [0, 1, 2, 0, 2, 3]))
+    path = b.write_gltf(tmp_path / "m.gltf")
+    assert len(import_gltf(path).meshes) == 1
+    with pytest.raises(AssetError, match="over the triangle budget of 1"):
+        import_gltf(path, InputBudgets(max_triangles=1))
+    with pytest.raises(AssetError, match="over the model's memory budget of 100 bytes"):
+        import_gltf(path, InputBudgets(max_model_bytes=100))
+    with pytest.raises(InvalidGeometryError, match=r"beyond \+-0\.5"):
+        import_gltf(path, InputBudgets(max_coordinate=0.5))
+
+
+def test_shared_subtrees_are_counted_not_walked(tmp_path):
+    # 24 levels of a node listing the same child twice: 2^24 placements were refused only after
+    # 34 s and 738 MB (223 s under load); they are counted over the DAG and refused at once.
+    import time
+
+    b = GltfBuilder()
+    mesh = b.add_triangles(TRI, [0, 1, 2])
+    child = b.add_node(mesh=mesh, root=False)
+    for _ in range(24):
+        child = b.add_node(children=[child, child], root=False)
+    b.doc["scenes"] = [{"nodes": [child]}]
+    b.doc["scene"] = 0
+    path = b.write_gltf(tmp_path / "m.gltf")
+    t0 = time.perf_counter()
+    with pytest.raises(AssetError, match="places more than 1000000 nodes"):
+        import_gltf(path)
+    assert time.perf_counter() - t0 < 2
+    # a small shared hierarchy still builds, each placement once: 2^3 = 8 meshes
+    b.doc["nodes"] = b.doc["nodes"][:4]
+    b.doc["scenes"] = [{"nodes": [3]}]
+    assert len(build(b, tmp_path, "small.gltf").meshes) == 8
+
+
+@pytest.mark.parametrize("uri,error", [
+    ("file:///etc/passwd", r"refuses the URI 'file:///etc/passwd'"),
+    ("data:image/png;base64,@@@", "invalid base64 data URI"),
+])
+def test_one_reference_policy_for_images_and_buffers(tmp_path, uri, error):
+    # an image's file:// or broken data URI warned and dropped the texture, while the same URI on a
+    # buffer failed the asset: both are errors now, for both kinds
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(TRI, [0, 1, 2], material=b.add_material(
+        pbrMetallicRoughness={"baseColorTexture": {"index": b.add_texture(uri=uri)}})))
+    with pytest.raises(AssetError, match=error):
+        build(b, tmp_path)
+    _, path = _tri_doc(tmp_path)
+    _edit(path, lambda d: d["buffers"][0].__setitem__("uri", uri))
+    with pytest.raises(AssetError, match=error):
+        import_gltf(path)

@@ -82,3 +82,53 @@ def test_draco_geometry_is_decoded_not_dropped(nasty_build, corpus):
     side = json.loads((out / f"{entry['id']}.asset.json").read_text())
     kept = sum(m.indices.shape[0] for m in model.meshes)
     assert kept + side["stats"]["degenerateTriangles"] == 110336
+
+
+# -- generated hostile inputs (#13): one bad model never stops the batch --------------------------
+
+def test_overflowing_models_fail_alone_with_one_line_each(tmp_path):
+    """A node scale 1e300 and an OBJ 'v 1e308 1e308 1e308' overflowed to inf and crashed the whole
+    build in canonical_json (traceback, exit 1, no --json report, the good model not built)."""
+    import sys
+
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    from gltf_builder import GltfBuilder
+
+    src = tmp_path / "in"
+    src.mkdir()
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), [0, 1, 2]),
+               scale=[1e300, 1e300, 1e300])
+    b.write_gltf(src / "scaled.gltf")
+    (src / "huge.obj").write_text("v 1e308 1e308 1e308\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (src / "junk.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n\x00\x00junk\nf 1 2 3\n")
+    (src / "good.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["build", str(src), "-o", str(out), "--no-lod", "--cache", str(tmp_path / "c"),
+                                  "--json", str(tmp_path / "r.json")])
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    report = {a["id"]: a for a in json.loads((tmp_path / "r.json").read_text())["assets"]}
+    assert report["good"]["status"] == "built" and (out / "good.json").exists()
+    assert report["junk"]["status"] == "built"
+    assert "junk.obj: 1 line(s) with binary bytes skipped (line 4)" in " ".join(report["junk"]["warnings"])
+    for name, words in (("scaled", "positions are non-finite or beyond"), ("huge", "has a coordinate beyond")):
+        entry = report[name]
+        assert entry["status"] == "failed" and "\n" not in entry["error"], entry
+        assert entry["error"].startswith(str(src / f"{name}.")) and words in entry["error"], entry["error"]
+
+
+def test_max_image_pixels_reaches_the_texture_step(tmp_path):
+    from PIL import Image
+
+    src = tmp_path / "in"
+    src.mkdir()
+    Image.new("RGBA", (64, 64), (200, 10, 10, 255)).save(src / "t.png")
+    (src / "m.obj").write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl a\nf 1/1 2/2 3/3\n")
+    (src / "m.mtl").write_text("newmtl a\nmap_Kd t.png\n")
+    args = ["build", str(src), "--no-lod", "--cache", str(tmp_path / "c"), "--json", str(tmp_path / "r.json")]
+    r = CliRunner().invoke(main, args + ["-o", str(tmp_path / "small"), "--max-image-pixels", "100"])
+    entry = json.loads((tmp_path / "r.json").read_text())["assets"][0]
+    assert any("64x64 = 4096 pixels" in w and "over the limit of 100 RGBA8 texels" in w for w in entry["warnings"]), r.output
+    r = CliRunner().invoke(main, args + ["-o", str(tmp_path / "default")])
+    entry = json.loads((tmp_path / "r.json").read_text())["assets"][0]
+    assert r.exit_code == 0 and not entry["warnings"], entry

@@ -137,7 +137,7 @@ def test_decompression_bomb_is_refused_from_the_header():
     with pytest.raises(InvalidTextureError, match="over the limit"):
         decode_image(source(data))
     small = pil_bytes(Image.fromarray(RGB), "PNG")
-    with pytest.raises(InvalidTextureError, match="6 pixels, over the limit of 5"):
+    with pytest.raises(InvalidTextureError, match="3x2 = 6 pixels, 24 bytes decoded as RGBA: over the limit of 5 RGBA8 texels"):
         decode_image(source(small), max_pixels=5)
     jpeg = pil_bytes(Image.fromarray(RGB), "JPEG")
     with pytest.raises(InvalidTextureError, match="over the limit"):
@@ -204,3 +204,57 @@ def test_corpus_layouts_decode(corpus):
         assert out.shape == (h, w, 4) and out.dtype == np.uint8
         ref = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
         assert (out == ref).all()
+
+
+# -- hostile images (#13) ------------------------------------------------------------------------
+
+def _zero_png(width: int, height: int, depth: int) -> bytes:
+    """An RGBA PNG of zero rows compressed as one stream: megapixels in a few KB."""
+    row = b"\x00" * (1 + width * 4 * depth // 8)
+    co = zlib.compressobj(9)
+    body = b"".join(co.compress(row) for _ in range(height)) + co.flush()
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    ihdr = struct.pack(">IIBBBBB", width, height, depth, 6, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", body) + chunk(b"IEND", b"")
+
+
+def test_16bit_png_counts_twice_the_bytes_and_is_refused_before_opencv_decodes_it():
+    # 16384 x 16384 RGBA16 from a 2 MB file used to decode on the OpenCV path (4.1 GB peak):
+    # 2 GiB decoded is over the default 1 GiB (16384^2 RGBA8 texels), refused from the header.
+    # Here the same rule at a small scale: 64x64 RGBA16 = 32 KiB against a limit of 4096 texels
+    # (16 KiB), while the 8-bit image of the same size (16 KiB) passes.
+    with pytest.raises(InvalidTextureError, match=r"64x64 16-bit = 4096 pixels, 32768 bytes decoded as RGBA: over the limit of 4096"):
+        decode_image(source(_zero_png(64, 64, 16)), max_pixels=64 * 64)
+    assert decode_image(source(_zero_png(64, 64, 8)), max_pixels=64 * 64).shape == (64, 64, 4)
+    assert decode_image(source(_zero_png(32, 64, 16)), max_pixels=64 * 64).dtype == np.uint16
+
+
+def test_a_16bit_bomb_header_is_refused_without_decoding():
+    data = raw_png(16384, 16384, 16, 6, b"")  # header only: decoding would fail, refusing must not decode
+    with pytest.raises(InvalidTextureError, match=r"16384x16384 16-bit = 268435456 pixels, 2048\.0 MiB decoded"):
+        decode_image(source(data))
+
+
+def test_pillows_bomb_limit_never_refuses_what_ours_accepts(monkeypatch):
+    # A real 16384^2 PNG is within our limit but over Pillow's (2 x 89 M pixels): it was dropped
+    # as "too large". Lower Pillow's limit far below a small image to show it no longer applies.
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 100)
+    data = pil_bytes(Image.new("RGBA", (64, 64), (1, 2, 3, 4)), "PNG")
+    assert decode_image(source(data)).shape == (64, 64, 4)
+    assert Image.MAX_IMAGE_PIXELS == 100  # restored after use
+
+
+def test_a_corrupt_16bit_png_is_one_line_with_nothing_on_stderr(capfd):
+    # libpng (through OpenCV) printed "libpng error: IDAT: incorrect data check" and the like to
+    # stderr: extra lines beside the one-line error. The stream is checked before OpenCV sees it.
+    good = _zero_png(8, 8, 16)
+    assert decode_image(source(good)).shape == (8, 8, 4)
+    idat = good.index(b"IDAT")
+    broken = bytearray(good)
+    broken[idat + 6] ^= 0xFF  # inside the zlib stream: the CRC no longer matches
+    truncated = raw_png(8, 8, 16, 6, bytes(1 + 8 * 8)[:20])  # valid CRCs, too little pixel data
+    for data, words in ((bytes(broken), "corrupt b'IDAT' chunk"), (truncated, "corrupt or truncated PNG")):
+        with pytest.raises(InvalidTextureError, match=words):
+            decode_image(source(data))
+    assert capfd.readouterr().err == ""
