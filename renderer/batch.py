@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 from typing import Any, Iterable
 
-from .validate import ValidateOptions, ValidationResult, run_checks
+from .results import ValidateOptions, ValidationResult
+from .validate import run_checks
 from .worker import WorkerPool
 
 

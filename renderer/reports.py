@@ -7,7 +7,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Sequence
 
-from .validate import ValidationResult
+from .results import ValidationResult
 
 
 def summary(results: Sequence[ValidationResult]) -> dict[str, int]:
