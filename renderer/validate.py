@@ -63,7 +63,9 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
                         for v in options.views]
             with ctx.timer("render"):
                 for cam in ctx.cams:
-                    ctx.coverage.append(compare.coverage(renderer.render(ctx.gpu, cam, mode="coverage")))
+                    facing = renderer.render(ctx.gpu, cam, mode="facing")
+                    ctx.coverage.append(compare.coverage(facing))
+                    ctx.front.append(compare.front(facing))
                     if "source" in selected:
                         ctx.shaded.append(renderer.render(ctx.gpu, cam))
         for check in REGISTRY:

@@ -49,6 +49,7 @@ class Context:
     gpu: Any = None
     cams: list[Camera] = field(default_factory=list)
     coverage: list[np.ndarray] = field(default_factory=list)   # per view, bool (H, W), no culling
+    front: list[np.ndarray] = field(default_factory=list)      # per view, bool: nearest surface faces the eye
     shaded: list[np.ndarray] = field(default_factory=list)     # per view, RGBA uint8
     cache: dict[str, Any] = field(default_factory=dict)
 

@@ -13,8 +13,8 @@ from .base import Check, Context
 class LodsCheck(Check):
     name = "lods"
     measures = ("for each LOD k >= 1, rendered at its switchDistance at the LOD reference pixel scale "
-                "(lod_reference_px, lod_reference_fov_deg) with the materials' culling: pixels where LOD k "
-                "and LOD0 differ and that are more than 1 px from the other's silhouette")
+                "(lod_reference_px, lod_reference_fov_deg), as the pixels whose nearest surface faces the eye "
+                "(or is double-sided), so holes and flipped faces show: pixels where LOD k and LOD0 differ and that are more than 1 px from the other's silhouette")
     tolerance = "lod_max_unexplained_px + lod_max_unexplained_fraction x LOD0's area (4 px + 0.2%)"
     reason = ("switchDistance is where the level's Hausdorff error projects to at most 1 px, so a correct "
               "level moves silhouette edges by at most 1 px: anything beyond 1 px is a hole or a flipped "
@@ -40,8 +40,8 @@ class LodsCheck(Check):
             fov = math.degrees(2 * math.atan((size / 2) / ppu))
             cam = fit_camera(model.center, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
             with ctx.timer("render"):
-                a = compare.coverage(ctx.renderer.render(ctx.gpu, cam, mode="silhouette", lod=0))
-                b = compare.coverage(ctx.renderer.render(ctx.gpu, cam, mode="silhouette", lod=k))
+                a = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
+                b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
             with ctx.timer("compare"):
                 bad = int(compare.unexplained(a, b, 1).sum())
                 area = int(a.sum())
