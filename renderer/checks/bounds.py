@@ -26,15 +26,14 @@ class BoundsCheck(Check):
             r.status = "skip"
             r.messages.append("no vertices to check")
             return r.finish()
-        used = []
+        used = np.zeros(len(m.positions), bool)
         for mesh in m.meshes:
             for lod in mesh.lods:
                 idx = m.indices[lod.first_index:lod.first_index + lod.index_count]
-                if idx.size:
-                    used.append(np.unique(idx).astype(np.int64) + mesh.vertex_base)
-        if not used:
+                used[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count][idx] = True
+        if not used.any():
             return r.finish()
-        p = m.positions[np.unique(np.concatenate(used))].astype(np.float64)
+        p = m.positions[used].astype(np.float64)
         diag = max(float(np.linalg.norm(m.bounds_max - m.bounds_min)), 1e-12)
         box_out = float(np.max(np.maximum(m.bounds_min - p, 0) + np.maximum(p - m.bounds_max, 0))) / diag
         sphere_out = float(np.max(np.linalg.norm(p - m.center, axis=1)) - m.radius) / diag

@@ -11,7 +11,6 @@ including roles the shaded render does not draw.
 from __future__ import annotations
 
 import base64
-import io
 import json
 import struct
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 from ..loader import read_ktx2
 from ..results import CheckResult
 from .base import Check, Context
+from .images import decode_rgba
 from .textures import SRGB_TO_LINEAR, VK_SRGB, linear_to_srgb_code
 
 ROLE_PX = 64
@@ -93,13 +93,15 @@ def _reduce(rgba: np.ndarray, size: tuple[int, int], role: str, fmt: int) -> np.
     """The source image area-averaged to ``size`` (w, h) the way the mip chain filters ``role``; RGB codes."""
     import cv2  # noqa: PLC0415
 
+    rgb = np.ascontiguousarray(rgba[..., :3])
     if role == "normal":
-        n = rgba[..., :3].astype(np.float32) * np.float32(2 / 255) - 1
+        table = (np.arange(256, dtype=np.float32) * np.float32(2 / 255) - 1).reshape(256, 1)
+        n = cv2.LUT(rgb, np.repeat(table, 3, axis=1).reshape(1, 256, 3))
         m = cv2.resize(n, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3)
         m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
         return (m + 1) * 127.5
     if fmt == VK_SRGB:
-        lin = SRGB_TO_LINEAR[rgba[..., :3]]
+        lin = cv2.LUT(rgb, np.repeat(SRGB_TO_LINEAR.reshape(256, 1), 3, axis=1).reshape(1, 256, 3))
         return linear_to_srgb_code(cv2.resize(lin, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3))
     return cv2.resize(rgba[..., :3].astype(np.float32), size, interpolation=cv2.INTER_AREA).reshape(
         size[1], size[0], 3)
@@ -119,8 +121,6 @@ class RolesCheck(Check):
               "material differ by tens of codes")
 
     def run(self, ctx: Context) -> CheckResult:
-        from PIL import Image  # noqa: PLC0415
-
         r = self.result()
         model = ctx.model
         assert model is not None
@@ -170,10 +170,7 @@ class RolesCheck(Check):
                         levels = list(ktx.levels)
                         k = next((i for i, lv in enumerate(levels) if max(lv.shape[:2]) <= ROLE_PX), len(levels) - 1)
                         lv = np.asarray(levels[k])
-                        with Image.open(io.BytesIO(raw)) as im:
-                            if im.format == "JPEG":
-                                im.draft("RGB", (max(lv.shape[1], 1) * 2, max(lv.shape[0], 1) * 2))
-                            rgba = np.asarray(im.convert("RGBA"))
+                        rgba = decode_rgba(raw, ctx.cache)
                         ref = _reduce(rgba, (lv.shape[1], lv.shape[0]), role, int(ktx.vk_format))
                         d = float(np.abs(ref - lv[..., :3].astype(np.float32)).mean()) / 255.0
                 except Exception as exc:  # noqa: BLE001 - the textures check reports unreadable KTX2s

@@ -13,16 +13,14 @@ from .base import Check, Context
 
 def drawn_positions(model: RenderModel, lod: int = 0) -> np.ndarray:
     """Positions referenced by the model's LOD ``lod`` draws."""
-    parts = []
+    used = np.zeros(len(model.positions), bool)
     for m in model.meshes:
         if not m.lods:
             continue
         level = m.lods[min(lod, len(m.lods) - 1)]
         idx = model.indices[level.first_index:level.first_index + level.index_count]
-        parts.append(np.unique(idx).astype(np.int64) + m.vertex_base)
-    if not parts:
-        return np.zeros((0, 3), np.float32)
-    return model.positions[np.unique(np.concatenate(parts))]
+        used[m.vertex_base:m.vertex_base + m.vertex_count][idx] = True
+    return model.positions[used]
 
 
 class SilhouetteCheck(Check):

@@ -20,6 +20,7 @@ import numpy as np
 from ..loader import material_list_path, read_ktx2, sidecar_path
 from ..results import CheckResult, ValidateOptions
 from .base import Check, Context
+from .images import decode_rgba
 
 SRGB_ROLES = {"baseColor", "emissive"}
 VK_SRGB, VK_UNORM = 43, 37
@@ -68,10 +69,9 @@ def _linear_premultiplied(texels: np.ndarray, fmt: int) -> np.ndarray:
 
 
 def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: CheckResult,
-                      options: ValidateOptions) -> tuple[list[str], dict[str, Any]]:
+                      options: ValidateOptions, cache: dict[str, Any] | None = None,
+                      ) -> tuple[list[str], dict[str, Any]]:
     """The checks of one KTX2; returns (problems, figures) and records measured values on ``r``."""
-    from PIL import Image  # noqa: PLC0415
-
     msgs: list[str] = []
     fig: dict[str, Any] = {}
     ktx_rel = tex["ktx2"]
@@ -141,10 +141,7 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
     png_rel = tex.get("path")
     if png_rel and good and good[0][0] == 0:
         try:
-            with Image.open(root / png_rel) as im:
-                if im.format == "JPEG":
-                    im.draft("RGB", im.size)  # full size, but skip what draft can
-                ref = np.asarray(im.convert("RGBA"))
+            ref = decode_rgba((root / png_rel).read_bytes(), cache)
         except Exception as exc:  # noqa: BLE001
             r.worst("unreadable", 1, 0)
             return msgs + [f"{key}: level-0 image {png_rel} unreadable: {exc}"], fig
@@ -233,7 +230,7 @@ class TexturesCheck(Check):
                     continue
                 if (ktx_rel, role) not in seen:  # a texture shared by several materials is checked once
                     with ctx.timer("compare"):
-                        msgs, fig = check_one_texture(root, key, role, tex, r, ctx.options)
+                        msgs, fig = check_one_texture(root, key, role, tex, r, ctx.options, ctx.cache)
                     seen[(ktx_rel, role)] = (fig, [m.split(": ", 1)[1] for m in msgs])
                 fig, tail = seen[(ktx_rel, role)]
                 figures[key] = fig
