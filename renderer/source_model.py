@@ -86,7 +86,16 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
     if not path.is_file():
         raise MissingFileError(path, "source file is missing")
     try:
-        scene = trimesh.load(str(path), force="scene", process=False)
+        diffuse = _spec_gloss_as_diffuse(path)
+        if diffuse is None:
+            scene = trimesh.load(str(path), force="scene", process=False)
+        else:
+            import io  # noqa: PLC0415
+
+            from trimesh.resolvers import FilePathResolver  # noqa: PLC0415
+
+            scene = trimesh.load(io.BytesIO(diffuse[0]), file_type=diffuse[1], force="scene", process=False,
+                                 resolver=FilePathResolver(str(path.parent) + "/"))
     except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds
         raise AssetError(path, f"trimesh cannot import the source: {exc}") from exc
     # Instances of the scene graph, transformed here (Scene.dump copies every geometry with its
@@ -141,6 +150,52 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)
 
 
+def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
+    """The source with every KHR_materials_pbrSpecularGlossiness material read as its diffuse
+    (baseColor = diffuseFactor x diffuseTexture), or None when it has none.
+
+    The renderer draws albedo (factor x texture x vertex colour, no metallic or specular term),
+    and the build stores a spec-gloss material's diffuse as its base colour. trimesh instead
+    converts spec-gloss to metal-rough (KHR's Babylon formula), whose baseColor differs from the
+    diffuse wherever the specular colour is above 0.04 (the default specularFactor is 1): drawn
+    without the metallic term that conversion relies on, it is not the same material. So the
+    reference reads the diffuse, as a spec-gloss renderer's diffuse term does.
+    """
+    import json  # noqa: PLC0415
+    import struct  # noqa: PLC0415
+
+    doc = _gltf_json(path)
+    if doc is None or "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
+        return None
+    for mat in doc.get("materials") or []:
+        sg = (mat.get("extensions") or {}).pop("KHR_materials_pbrSpecularGlossiness", None)
+        if sg is None:
+            continue
+        pbr = mat.setdefault("pbrMetallicRoughness", {})
+        pbr.pop("baseColorTexture", None)
+        pbr["baseColorFactor"] = list(sg.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))
+        if sg.get("diffuseTexture") is not None:
+            pbr["baseColorTexture"] = sg["diffuseTexture"]
+    doc["extensionsUsed"] = [e for e in doc["extensionsUsed"] if e != "KHR_materials_pbrSpecularGlossiness"]
+    doc["extensionsRequired"] = [e for e in doc.get("extensionsRequired") or []
+                                 if e != "KHR_materials_pbrSpecularGlossiness"]
+    js = json.dumps(doc).encode()
+    if path.suffix.lower() == ".gltf":
+        return js, "gltf"
+    data = path.read_bytes()
+    off, blob = 12, b""
+    while off + 8 <= len(data):
+        clen, ctype = struct.unpack_from("<II", data, off)
+        if ctype == 0x004E4942:
+            blob = data[off + 8: off + 8 + clen]
+        off += 8 + clen
+    js += b" " * (-len(js) % 4)
+    chunks = struct.pack("<II", len(js), 0x4E4F534A) + js
+    if blob:
+        chunks += struct.pack("<II", len(blob), 0x004E4942) + blob
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks, "glb"
+
+
 def _gltf_json(path: Path) -> dict[str, Any] | None:
     """The JSON of a .gltf or .glb file (None for other formats or on errors)."""
     import json  # noqa: PLC0415
@@ -178,6 +233,14 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
         if "KHR_texture_transform" in used:
             colour = False
             notes.append("the source uses KHR_texture_transform, which trimesh ignores: colours not compared")
+        for mat in doc.get("materials") or []:
+            pbr = (mat or {}).get("pbrMetallicRoughness") or {}
+            sg = ((mat or {}).get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}
+            info = pbr.get("baseColorTexture") or sg.get("diffuseTexture") or {}
+            if colour and int(info.get("texCoord", 0) or 0) != 0:
+                colour = False
+                notes.append("a base colour texture uses a TEXCOORD other than 0, which trimesh does not read: "
+                             "colours not compared (the roles check still compares the textures)")
     elif path.suffix.lower() == ".obj":
         try:
             with path.open("rb") as f:

@@ -153,7 +153,7 @@ def test_batch_in_subprocess_with_reports(tmp_path: Path, cube: Path) -> None:
     write_json_report(results, tmp_path / "report.json")
     write_junit_report(results, tmp_path / "report.xml")
     data = json.loads((tmp_path / "report.json").read_text())
-    assert data["summary"] == {"models": 3, "passed": 1, "failed": 2}
+    assert data["summary"] == {"models": 3, "passed": 1, "failed": 2, "acceptedByBaseline": 0}
     assert ValidationResult.from_json(data["results"][0]).passed
     root = ET.parse(tmp_path / "report.xml").getroot()
     assert root.tag == "testsuites" and int(root.get("failures")) >= 2

@@ -99,6 +99,11 @@ class SourceCheck(Check):
             r.messages += caveats
             return r.finish()
         culled = src.suffix.lower() in (".gltf", ".glb")  # OBJ has no double-sidedness
+        names = {str(a.get("name", "")).lower() for a in (model.sidecar.get("vertexLayout") or {}).get("attributes", [])}
+        if not names & {"color0", "color", "color_0", "colour0"} and (source.colors != 1.0).any():
+            source.colors[:] = 1.0  # the build's layout carries no colour (--layout): draw the source without
+            caveats = caveats + ["the built vertex layout has no colour attribute: the source's vertex colours "
+                                 "are not drawn"]
         gpu = None
         try:
             with ctx.timer("upload"):
