@@ -28,8 +28,20 @@ def find_built_models(paths: tuple[str, ...] | list[str]) -> list[Path]:
     return found
 
 
+def _list_checks(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    from .checks import REGISTRY  # noqa: PLC0415
+
+    for c in REGISTRY:
+        click.echo(f"{c.name}\n  measures:  {c.measures}\n  tolerance: {c.tolerance}\n  why:       {c.reason}\n")
+    ctx.exit(0)
+
+
 @click.command("validate")
 @click.argument("paths", nargs=-1, required=True, type=click.Path())
+@click.option("--list-checks", is_flag=True, expose_value=False, is_eager=True, callback=_list_checks,
+              help="Print every check: what it measures, its tolerance and why, then exit.")
 @click.option("--sources", "source_root", type=click.Path(file_okay=False),
               help="Directory holding the source models (searched recursively) for the source check.")
 @click.option("--size", default=256, show_default=True, help="Render size in pixels (square).")
