@@ -214,6 +214,22 @@ def _gltf_json(path: Path) -> dict[str, Any] | None:
     return None
 
 
+def uv_caveat(path: Path) -> str | None:
+    """Why the source's uv0 as trimesh reads it is not the build's uv0 (None when it is)."""
+    doc = _gltf_json(path)
+    if doc is None:
+        return None
+    if "KHR_texture_transform" in set(doc.get("extensionsUsed", [])):
+        return "the source uses KHR_texture_transform (baked into the built UVs): UVs not compared"
+    for mat in doc.get("materials") or []:
+        pbr = (mat or {}).get("pbrMetallicRoughness") or {}
+        sg = ((mat or {}).get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}
+        info = pbr.get("baseColorTexture") or sg.get("diffuseTexture") or {}
+        if int(info.get("texCoord", 0) or 0) != 0:
+            return "a base colour texture uses a TEXCOORD other than 0, which trimesh does not read: UVs not compared"
+    return None
+
+
 def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple[bool, bool, list[str]]:
     """(compare geometry?, compare colours?, notes): where trimesh's reading is known to differ.
 

@@ -7,11 +7,11 @@ and ``CHECK = ...``, added here.
 
 from __future__ import annotations
 
-from . import bounds, load, lods, roles, silhouette, source, textures, vulkan
+from . import bounds, load, lods, roles, silhouette, source, textures, uvs, vulkan
 from .base import Check, Context
 
 REGISTRY: tuple[Check, ...] = (load.CHECK, vulkan.CHECK, bounds.CHECK, silhouette.CHECK, source.CHECK,
-                               lods.CHECK, textures.CHECK, roles.CHECK)
+                               uvs.CHECK, lods.CHECK, textures.CHECK, roles.CHECK)
 BY_NAME: dict[str, Check] = {c.name: c for c in REGISTRY}
 NAMES: tuple[str, ...] = tuple(BY_NAME)
 

@@ -13,7 +13,7 @@ from .base import Check, Context
 class LodsCheck(Check):
     name = "lods"
     measures = ("for each LOD k >= 1, rendered at its switchDistance at the LOD reference pixel scale "
-                "(lod_reference_px, lod_reference_fov_deg), as the pixels whose nearest surface faces the eye "
+                "(lod_reference_px, lod_reference_fov_deg) from the first view and its opposite, as the pixels whose nearest surface faces the eye "
                 "(or is double-sided), so holes and flipped faces show: pixels where LOD k and LOD0 differ and that are more than 1 px from the other's silhouette")
     tolerance = "lod_max_unexplained_px + lod_max_unexplained_fraction x LOD0's area (4 px + 0.2%)"
     reason = ("switchDistance is where the level's Hausdorff error projects to at most 1 px, so a correct "
@@ -30,7 +30,7 @@ class LodsCheck(Check):
         if levels <= 1:
             return r.finish()
         ppu = (options.lod_reference_px / 2) / math.tan(math.radians(options.lod_reference_fov_deg) / 2)
-        view = options.views[0]
+        views = (options.views[0], tuple(-c for c in options.views[0]))  # a hole on the far side shows too
         for k in range(1, levels):
             dists = [m.lods[min(k, len(m.lods) - 1)].switch_distance for m in model.meshes if m.lods]
             switch = max(dists) if dists else 0.0
@@ -38,18 +38,22 @@ class LodsCheck(Check):
             radius_px = model.radius * ppu / distance
             size = int(min(max(2 * radius_px * 1.1 + 4, 32), options.lod_max_render_px))
             fov = math.degrees(2 * math.atan((size / 2) / ppu))
-            cam = fit_camera(model.center, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
-            with ctx.timer("render"):
-                a = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
-                b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
+            bad = area = differing = 0
+            for view in views:
+                cam = fit_camera(model.center, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
+                with ctx.timer("render"):
+                    a = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
+                    b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
+                with ctx.timer("compare"):
+                    bad = max(bad, int(compare.unexplained(a, b, 1).sum()))
+                    area = max(area, int(a.sum()))
+                    differing = max(differing, int((a ^ b).sum()))
             with ctx.timer("compare"):
-                bad = int(compare.unexplained(a, b, 1).sum())
-                area = int(a.sum())
                 budget = options.lod_max_unexplained_px + options.lod_max_unexplained_fraction * area
                 r.figures["perLevel"].append({
                     "level": k, "switchDistance": switch, "renderDistance": round(distance, 6),
                     "renderPx": size, "triangles": model.triangles(k), "areaPx": area,
-                    "differingPx": int((a ^ b).sum()), "unexplainedPx": bad, "budgetPx": round(budget, 1)})
+                    "differingPx": differing, "unexplainedPx": bad, "budgetPx": round(budget, 1)})
                 if area == 0:
                     r.worst("emptyLod0", 1, 0)
                     r.messages.append(f"LOD{k}: LOD0 covers no pixel at {distance:.4g}")

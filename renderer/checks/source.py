@@ -67,7 +67,7 @@ class SourceCheck(Check):
     measures = ("per view, LOD0 against the source imported by trimesh and drawn by the same renderer: "
                 "silhouette XOR over union and pixels more than 1 px from the other silhouette (coverage, "
                 "no culling), the same for the pixels whose nearest surface faces the eye or is double-sided "
-                "(glTF sources: winding), and the mean "
+                "(winding), and the mean "
                 "absolute difference of 8x8-block mean colours where both cover")
     tolerance = ("source_max_xor 3% of the union; source_max_unexplained 0.2% of the union; "
                  "source_color_tolerance 0.08 (0..1 sRGB)")
@@ -98,7 +98,7 @@ class SourceCheck(Check):
             r.status = "skip"
             r.messages += caveats
             return r.finish()
-        culled = src.suffix.lower() in (".gltf", ".glb")  # OBJ has no double-sidedness
+        culled = True  # OBJ materials are single-sided on both sides (trimesh's and the build's)
         names = {str(a.get("name", "")).lower() for a in (model.sidecar.get("vertexLayout") or {}).get("attributes", [])}
         if not names & {"color0", "color", "color_0", "colour0"} and (source.colors != 1.0).any():
             source.colors[:] = 1.0  # the build's layout carries no colour (--layout): draw the source without
