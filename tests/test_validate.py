@@ -44,8 +44,8 @@ def _ktx(cube: Path) -> Path:
 def test_fixture_passes_every_check() -> None:
     r = validate_model(CUBE, OPTS, isolate=False)
     assert r.passed, r.failures()
-    assert [c.name for c in r.checks] == ["load", "vulkan", "bounds", "silhouette", "source", "lods", "textures",
-                                          "roles"]
+    assert [c.name for c in r.checks] == ["load", "vulkan", "bounds", "silhouette", "source", "uvs", "lods",
+                                          "textures", "roles"]
     # the fixture's source is an OBJ: texture roles are compared for glTF sources only
     assert all(c.status == "pass" for c in r.checks if c.name != "roles"), r.to_json()
     sil = r.check("silhouette")

@@ -98,7 +98,17 @@ class SourceCheck(Check):
             r.status = "skip"
             r.messages += caveats
             return r.finish()
-        culled = True  # OBJ materials are single-sided on both sides (trimesh's and the build's)
+        culled = True
+        if src.suffix.lower() not in (".gltf", ".glb"):
+            # OBJ has no double-sidedness: the source is drawn as the build's materials say when they
+            # all agree; with mixed materials the winding is not compared
+            sides = {m.double_sided for m in model.materials}
+            if len(sides) == 1:
+                for m in source.materials:
+                    m.double_sided = next(iter(sides))
+            else:
+                culled = False
+                caveats = caveats + ["the OBJ build mixes single- and double-sided materials: winding not compared"]
         names = {str(a.get("name", "")).lower() for a in (model.sidecar.get("vertexLayout") or {}).get("attributes", [])}
         if not names & {"color0", "color", "color_0", "colour0"} and (source.colors != 1.0).any():
             source.colors[:] = 1.0  # the build's layout carries no colour (--layout): draw the source without
