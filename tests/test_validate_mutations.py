@@ -80,3 +80,16 @@ def test_mutation_is_caught(built: Path, kind: str, tmp_path: Path) -> None:
     r = validate_model(model, OPTS, isolate=False)
     ok, lines = caught(r, checks, phrase)
     assert ok, f"{kind} not caught by {checks} with {phrase!r}: {lines or 'passed'}"
+
+
+def test_a_hole_a_double_sided_closed_mesh_hides_is_caught(built: Path, tmp_path: Path) -> None:
+    """Through a hole in a double-sided sphere the inside shows, so every picture is covered: the
+    open edges give it away."""
+    mutate, _, _ = MUTATIONS["LOD level with a hole"]
+    shutil.copytree(built / "out", tmp_path / "out")
+    model = tmp_path / "out" / "mask.json"
+    mutate(model)
+    r = validate_model(model, OPTS, isolate=False)
+    lods = r.check("lods")
+    assert lods.status == "fail" and "a hole?" in " ".join(lods.messages), lods.messages
+    assert lods.measured["openEdgeGrowth"] > lods.tolerance["openEdgeGrowth"]
