@@ -13,26 +13,34 @@ from .base import Check, Context
 
 
 def boundary_length(model, lod: int) -> float:
-    """Total length of the open edges (used by one triangle; vertices welded by position) at LOD ``lod``."""
+    """Total length of the open edges (used by exactly one triangle) at LOD ``lod``.
+
+    Vertices are not welded: a UV or normal seam counts as open in every level alike, and
+    simplification keeps seams (shortened, never lengthened), so the growth over LOD0 is what
+    the level opened. Edges are 1-D int64 keys, so a million triangles take a sort of 3M integers.
+    """
     total = 0.0
     for mesh in model.meshes:
         if not mesh.lods:
             continue
         level = mesh.lods[min(lod, len(mesh.lods) - 1)]
-        tri = model.indices[level.first_index:level.first_index + level.index_count].reshape(-1, 3).astype(np.int64)
-        if not len(tri):
+        t = model.indices[level.first_index:level.first_index + level.index_count].reshape(-1, 3).astype(np.int64)
+        if not len(t):
             continue
         pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
-        _, weld = np.unique(pos, axis=0, return_inverse=True)
-        t = weld.reshape(-1)[tri]
         t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]  # collapsed triangles draw nothing
-        e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
-        uniq, counts = np.unique(e, axis=0, return_counts=True)
-        open_e = uniq[counts == 1]
-        if len(open_e):
-            first = np.zeros(weld.max() + 1, np.int64)
-            first[weld.reshape(-1)] = np.arange(len(pos))
-            total += float(np.linalg.norm(pos[first[open_e[:, 0]]] - pos[first[open_e[:, 1]]], axis=1).sum())
+        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
+        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
+        keys = np.minimum(a, b) * np.int64(mesh.vertex_count + 1) + np.maximum(a, b)
+        keys.sort()
+        if not keys.size:
+            continue
+        starts = np.r_[True, keys[1:] != keys[:-1]]
+        ends = np.r_[keys[1:] != keys[:-1], True]
+        single = keys[starts & ends]
+        if single.size:
+            u, v = single // (mesh.vertex_count + 1), single % (mesh.vertex_count + 1)
+            total += float(np.linalg.norm(pos[u] - pos[v], axis=1).sum())
     return total
 
 
@@ -45,14 +53,14 @@ class LodsCheck(Check):
                 "(lod_reference_px, lod_reference_fov_deg) from the first view and its opposite, as the pixels whose nearest surface faces the eye "
                 "(or is double-sided), so holes and flipped faces show: pixels where LOD k and LOD0 differ and that are more than 1 px from the other's silhouette")
     tolerance = ("lod_max_unexplained_px + lod_max_unexplained_fraction x LOD0's area (4 px + 0.2%); open "
-                 "edges (vertices welded by position) at most 0.05 diagonals longer than LOD0's")
+                 "edges at most 0.05 diagonals longer than LOD0's")
     reason = ("switchDistance is where the level's Hausdorff error projects to at most 1 px, so a correct "
               "level moves silhouette edges by at most 1 px: anything beyond 1 px is a hole or a flipped "
               "face. The small budget absorbs pixel-centre ties on edges nearly parallel to a row. "
-              "Holes a double-sided closed mesh hides in every picture show as open edges: simplifying "
-              "straightens borders, so LOD k's open edges were never longer than LOD0's on the corpus (worst "
-              "growth 0.000 diagonals over 15 models with LODs, 2CylinderEngine's 95-diagonal CAD borders "
-              "included); 0.05 diagonals leaves room for a border vertex moved by its Hausdorff error")
+              "Holes a double-sided closed mesh hides in every picture show as open edges (seams included, "
+              "unwelded): simplifying straightens borders and seams, so LOD k's open edges were never longer "
+              "than LOD0's (growth never above 0 over 74 LOD levels of 19 corpus and generated models); 0.05 "
+              "diagonals leaves room for a border vertex moved by its Hausdorff error")
     needs_render = True
 
     def run(self, ctx: Context) -> CheckResult:
