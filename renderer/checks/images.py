@@ -1,6 +1,6 @@
 """Decoding images for the checks once per model: the level-0 file of a texture is usually the
 source image unchanged, so the ``textures`` and ``roles`` checks share one decode (keyed by a
-digest of the bytes). OpenCV decodes PNG about 2x faster than Pillow + convert; Pillow is the
+digest of the bytes). OpenCV decodes straight to an array (no Pillow image + convert copy); Pillow is the
 fallback for what OpenCV does not read (and for palette images with transparency)."""
 
 from __future__ import annotations
