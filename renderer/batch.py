@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 from typing import Any, Iterable
 
-from .validate import ValidateOptions, ValidationResult, run_checks
+from .results import ValidateOptions, ValidationResult
+from .validate import run_checks
 from .worker import WorkerPool
 
 
@@ -36,28 +37,62 @@ def validate_model(model_json: Path | str, options: ValidateOptions | None = Non
 
 
 def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None = None,
-                   isolate: bool = True, progress: Any = None) -> list[ValidationResult]:
-    """Validate many built models with one long-lived renderer subprocess.
+                   isolate: bool = True, progress: Any = None, jobs: int = 1,
+                   baseline: dict[str, Any] | None = None) -> list[ValidationResult]:
+    """Validate many built models with long-lived renderer subprocesses.
 
-    Device set-up happens once; each asset has ``options.timeout_s``. If the subprocess dies
-    (driver crash) or times out, that asset fails with a clear message and a fresh
-    subprocess continues the batch. ``progress(result)`` is called after each asset.
+    Device set-up happens once per subprocess; ``jobs`` subprocesses (each its own Vulkan
+    device) take models from one queue, so a batch runs in parallel. Each asset has
+    ``options.timeout_s``. If a subprocess dies (driver crash) or times out, that asset fails with
+    a clear message and a fresh subprocess continues. ``progress(result)`` is called after each
+    asset (in completion order); the returned list is in input order. ``baseline`` (see
+    :mod:`renderer.baseline`) marks accepted known differences.
     """
+    from .baseline import apply_baseline  # noqa: PLC0415
+
     options = options or ValidateOptions()
     paths = [Path(p) for p in paths]
+    out: list[ValidationResult | None] = [None] * len(paths)
+
+    def done(i: int, r: ValidationResult) -> None:
+        if baseline:
+            apply_baseline(r, baseline)
+        out[i] = r
+        if progress:
+            progress(r)
+
     if not isolate:
-        out = []
-        for p in paths:
-            r = validate_model(p, options, isolate=False)
-            out.append(r)
-            if progress:
-                progress(r)
-        return out
-    with WorkerPool(options) as pool:
-        out = []
-        for p in paths:
-            r = pool.validate(p)
-            out.append(r)
-            if progress:
-                progress(r)
-        return out
+        for i, p in enumerate(paths):
+            done(i, validate_model(p, options, isolate=False))
+        return [r for r in out if r is not None]
+    jobs = max(1, min(int(jobs), len(paths) or 1))
+    if jobs == 1:
+        with WorkerPool(options) as pool:
+            for i, p in enumerate(paths):
+                done(i, pool.validate(p))
+        return [r for r in out if r is not None]
+    import queue  # noqa: PLC0415
+    import threading  # noqa: PLC0415
+
+    todo: "queue.Queue[int]" = queue.Queue()
+    for i in range(len(paths)):
+        todo.put(i)
+    lock = threading.Lock()
+
+    def worker() -> None:
+        with WorkerPool(options) as pool:  # subprocess I/O releases the GIL: threads suffice
+            while True:
+                try:
+                    i = todo.get_nowait()
+                except queue.Empty:
+                    return
+                r = pool.validate(paths[i])
+                with lock:
+                    done(i, r)
+
+    threads = [threading.Thread(target=worker, daemon=True) for _ in range(jobs)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return [r for r in out if r is not None]

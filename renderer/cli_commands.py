@@ -28,27 +28,48 @@ def find_built_models(paths: tuple[str, ...] | list[str]) -> list[Path]:
     return found
 
 
+def _list_checks(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    from .checks import REGISTRY  # noqa: PLC0415
+
+    for c in REGISTRY:
+        click.echo(f"{c.name}\n  measures:  {c.measures}\n  tolerance: {c.tolerance}\n  why:       {c.reason}\n")
+    ctx.exit(0)
+
+
 @click.command("validate")
 @click.argument("paths", nargs=-1, required=True, type=click.Path())
+@click.option("--list-checks", is_flag=True, expose_value=False, is_eager=True, callback=_list_checks,
+              help="Print every check: what it measures, its tolerance and why, then exit.")
 @click.option("--sources", "source_root", type=click.Path(file_okay=False),
               help="Directory holding the source models (searched recursively) for the source check.")
 @click.option("--size", default=256, show_default=True, help="Render size in pixels (square).")
-@click.option("--checks", default=",".join(("load", "vulkan", "silhouette", "source", "lods", "textures")),
-              show_default=True, help="Comma-separated checks to run.")
+@click.option("--checks", default="all", show_default=True,
+              help="Comma-separated checks to run (load, vulkan, bounds, silhouette, source, lods, textures, roles).")
 @click.option("--no-validation-layer", is_flag=True, help="Do not enable the Khronos validation layer.")
 @click.option("--timeout", default=120.0, show_default=True, help="Seconds allowed per asset.")
-@click.option("--json-report", type=click.Path(dir_okay=False), help="Write a JSON report here.")
+@click.option("--json", "json_report", type=click.Path(dir_okay=False), help="Write a JSON report here.")
+@click.option("--json-report", "json_report", type=click.Path(dir_okay=False), hidden=True)
 @click.option("--junit", type=click.Path(dir_okay=False), help="Write a JUnit XML report here.")
+@click.option("--baseline", type=click.Path(exists=True, dir_okay=False),
+              help="Accept the known differences this baseline file lists (per model and check).")
+@click.option("--write-baseline", type=click.Path(dir_okay=False),
+              help="Write a baseline accepting every failure of this run.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Renderer processes validating models in parallel.")
 @click.option("--in-process", is_flag=True, help="Render in this process (no crash isolation).")
 @click.option("-v", "--verbose", is_flag=True, help="Print the figures of every check.")
 def validate(paths: tuple[str, ...], source_root: str | None, size: int, checks: str, no_validation_layer: bool,
-             timeout: float, json_report: str | None, junit: str | None, in_process: bool, verbose: bool) -> None:
+             timeout: float, json_report: str | None, junit: str | None, baseline: str | None,
+             write_baseline: str | None, jobs: int, in_process: bool, verbose: bool) -> None:
     """Validate built models (OUT/ID.json files or OUT directories) by rendering them headless."""
-    from .reports import summary, write_json_report, write_junit_report  # noqa: PLC0415
+    from . import baseline as baselines  # noqa: PLC0415
     from .batch import validate_batch  # noqa: PLC0415
+    from .reports import measured_over, summary, write_json_report, write_junit_report  # noqa: PLC0415
     from .validate import CHECKS, ValidateOptions  # noqa: PLC0415
 
-    selected = tuple(c.strip() for c in checks.split(",") if c.strip())
+    selected = tuple(c.strip() for c in checks.split(",") if c.strip() and c.strip() != "all")
     unknown = set(selected) - set(CHECKS)
     if unknown:
         raise click.BadParameter(f"unknown checks {sorted(unknown)} (choose from {', '.join(CHECKS)})")
@@ -62,8 +83,14 @@ def validate(paths: tuple[str, ...], source_root: str | None, size: int, checks:
         status = "ok    " if r.passed else "FAIL  "
         t = sum(r.timings.values())
         click.echo(f"{status}{r.model}  ({t:.2f} s)")
-        for line in r.failures():
-            click.echo(f"      {line.split(': ', 1)[-1]}")
+        if r.error:
+            click.echo(f"      {r.error}")
+        for c in r.checks:
+            if c.status == "fail":
+                over = "; ".join(f"{q} {v:g} > {t:g}" for q, v, t in measured_over(c))
+                click.echo(f"      {c.name} [{over}]: {'; '.join(c.messages) or 'failed'}")
+            elif c.accepted:
+                click.echo(f"      {c.name}: {c.accepted}")
         for c in r.checks:
             if c.status == "skip":
                 click.echo(f"      skipped {c.name}: {'; '.join(c.messages)}")
@@ -71,10 +98,13 @@ def validate(paths: tuple[str, ...], source_root: str | None, size: int, checks:
                 click.echo(f"      {c.name}: {c.status} {c.figures}")
 
     try:
-        results = validate_batch(models, opts, isolate=not in_process, progress=show)
+        accepted = baselines.load_baseline(baseline) if baseline else None
+        results = validate_batch(models, opts, isolate=not in_process, progress=show, jobs=jobs, baseline=accepted)
     except AssetpipeError as exc:
         click.echo(f"assetpipe: {exc}", err=True)
         sys.exit(2)
+    if write_baseline:
+        baselines.write_baseline(results, write_baseline)
     if json_report:
         write_json_report(results, json_report)
     if junit:

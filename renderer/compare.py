@@ -10,6 +10,12 @@ def coverage(img: np.ndarray) -> np.ndarray:
     return img[..., 3] > 0
 
 
+def front(img: np.ndarray) -> np.ndarray:
+    """Pixels of a ``mode="facing"`` render where the nearest surface faces the camera (or is
+    double-sided): red 255 there, about 188 (0.5 encoded as sRGB) where a back face is nearest."""
+    return (img[..., 3] > 0) & (img[..., 0] > 220)
+
+
 def bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     """(x0, y0, x1, y1) of ``mask``, x1/y1 exclusive, or None when empty."""
     rows = np.flatnonzero(mask.any(axis=1))

@@ -8,7 +8,10 @@ readback to numpy.
   on, depth write off). ``doubleSided`` disables culling, otherwise back faces are culled.
 * ``mode="silhouette"`` draws every triangle in white with the materials' culling (no
   blending, no alpha discard): what is visible of the geometry, so holes and flipped
-  windings show. ``mode="coverage"`` draws every triangle without culling.
+  windings show. ``mode="coverage"`` draws every triangle without culling. ``mode="facing"``
+  draws every triangle without culling, red 255 where the nearest surface faces the camera
+  (or is double-sided) and about 188 (0.5 in sRGB) where a back face is nearest: coverage and
+  winding from one render (see :func:`renderer.compare.front`).
 """
 
 from __future__ import annotations
@@ -358,7 +361,7 @@ class Renderer:
 
         The background is transparent black (alpha 0): alpha > 0 is the coverage.
         """
-        if mode not in ("shaded", "silhouette", "coverage"):
+        if mode not in ("shaded", "silhouette", "coverage", "facing"):
             raise ValueError(f"unknown render mode {mode!r}")
         t0 = time.perf_counter()
         self.resize(camera.width, camera.height)
@@ -410,7 +413,7 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                if mode == "coverage":
+                if mode in ("coverage", "facing"):
                     key = (False, False)
                 elif silhouette:
                     key = (not d.double_sided, False)
@@ -425,7 +428,8 @@ class Renderer:
                     vk.vkCmdBindDescriptorSets(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, self.pipeline_layout,
                                                0, 1, [dset], 0, None)
                     bound_set = dset
-                ints[:] = (d.material, d.tex_slot, 1 if silhouette else 0, 0)
+                ints[:] = (d.material, d.tex_slot, 2 if mode == "facing" else 1 if silhouette else 0,
+                           1 if d.double_sided else 0)
                 data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
                 vk.vkCmdPushConstants(cmd, self.pipeline_layout,
                                       vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,

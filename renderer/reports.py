@@ -5,22 +5,46 @@ from __future__ import annotations
 import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
-from .validate import ValidationResult
+from .results import CheckResult, ValidationResult
 
 
 def summary(results: Sequence[ValidationResult]) -> dict[str, int]:
     """Counts of models, passed and failed."""
     passed = sum(1 for r in results if r.passed)
-    return {"models": len(results), "passed": passed, "failed": len(results) - passed}
+    accepted = sum(1 for r in results for c in r.checks if c.accepted)
+    return {"models": len(results), "passed": passed, "failed": len(results) - passed,
+            "acceptedByBaseline": accepted}
+
+
+def measured_over(c: CheckResult) -> list[tuple[str, float, float]]:
+    """(quantity, measured, tolerance) of each quantity of ``c`` over its tolerance."""
+    return [(q, v, c.tolerance[q]) for q, v in sorted(c.measured.items())
+            if q in c.tolerance and v > c.tolerance[q]]
+
+
+def failed_checks(results: Sequence[ValidationResult]) -> list[dict[str, Any]]:
+    """One entry per failed check: model, check, each quantity's measured value and tolerance, messages."""
+    out: list[dict[str, Any]] = []
+    for r in results:
+        if r.error:
+            out.append({"model": r.id, "check": None, "error": r.error})
+        for c in r.checks:
+            if c.status == "fail":
+                out.append({"model": r.id, "check": c.name,
+                            "measured": {q: v for q, v, _ in measured_over(c)},
+                            "tolerance": {q: t for q, _, t in measured_over(c)}, "messages": c.messages})
+    return out
 
 
 def write_json_report(results: Sequence[ValidationResult], path: Path | str) -> Path:
-    """``{"summary": {...}, "results": [ValidationResult.to_json(), ...]}``."""
+    """``{"summary": {...}, "failures": [...], "results": [ValidationResult.to_json(), ...]}``;
+    ``failures`` names each failed check with its measured values and tolerances."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"summary": summary(results), "results": [r.to_json() for r in results]}
+    doc = {"summary": summary(results), "failures": failed_checks(results),
+           "results": [r.to_json() for r in results]}
     path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     return path
 
@@ -48,8 +72,11 @@ def write_junit_report(results: Sequence[ValidationResult], path: Path | str,
         for c in r.checks:
             case = ET.SubElement(suite, "testcase", classname=r.id, name=c.name, time=f"{c.seconds:.3f}")
             if c.status == "fail":
-                text = "\n".join(c.messages) or "failed"
-                ET.SubElement(case, "failure", message=text.splitlines()[0][:500]).text = text
+                over = measured_over(c)
+                head = f"{c.name}: " + "; ".join(f"{q} measured {v:g}, tolerance {t:g}" for q, v, t in over)
+                text = "\n".join([head] + c.messages) if over else ("\n".join(c.messages) or "failed")
+                ET.SubElement(case, "failure", message=text.splitlines()[0][:500],
+                              type="check").text = text
                 s_fail += 1
             elif c.status == "skip":
                 ET.SubElement(case, "skipped", message="; ".join(c.messages)[:500])

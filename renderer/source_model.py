@@ -20,7 +20,8 @@ from assetpipe.core.errors import AssetError, MissingFileError
 from .loader import VK_FORMAT_R8G8B8A8_SRGB, Lod, Material, Mesh, RenderModel, Texture
 
 
-def _material_of(geom: Any, name: str, notes: list[str]) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
+def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
+                 ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
     """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry."""
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
@@ -59,11 +60,15 @@ def _material_of(geom: Any, name: str, notes: list[str]) -> tuple[Material, np.n
         cutoff = float(getattr(mat, "alphaCutoff", None) or 0.5)
         double_sided = bool(getattr(mat, "doubleSided", False))
     texture = None
-    if image is not None and uv is not None:
+    if image is not None and uv is not None and images is not None and id(image) in images:
+        texture = images[id(image)]
+    elif image is not None and uv is not None:
         try:
             rgba = np.asarray(image.convert("RGBA"), np.uint8)
             texture = Texture(name=f"{name} source image", levels=[rgba], vk_format=VK_FORMAT_R8G8B8A8_SRGB,
                               sampler={"minFilter": 9729}, from_ktx2=False)
+            if images is not None:
+                images[id(image)] = texture
         except Exception as exc:  # noqa: BLE001
             notes.append(f"{name}: source image not usable ({exc})")
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
@@ -81,25 +86,50 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
     if not path.is_file():
         raise MissingFileError(path, "source file is missing")
     try:
-        scene = trimesh.load(str(path), force="scene", process=False)
+        diffuse = _spec_gloss_as_diffuse(path)
+        if diffuse is None:
+            scene = trimesh.load(str(path), force="scene", process=False)
+        else:
+            import io  # noqa: PLC0415
+
+            from trimesh.resolvers import FilePathResolver  # noqa: PLC0415
+
+            scene = trimesh.load(io.BytesIO(diffuse[0]), file_type=diffuse[1], force="scene", process=False,
+                                 resolver=FilePathResolver(str(path.parent) + "/"))
     except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds
         raise AssetError(path, f"trimesh cannot import the source: {exc}") from exc
-    geoms = [g for g in scene.dump(concatenate=False) if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    # Instances of the scene graph, transformed here (Scene.dump copies every geometry with its
+    # material images: about 1 s for four 2048^2 textures). A reflecting transform flips the
+    # winding back, as trimesh's apply_transform does.
+    instances = []
+    for node in scene.graph.nodes_geometry:
+        transform, gname = scene.graph[node]
+        g = scene.geometry.get(gname)
+        if isinstance(g, trimesh.Trimesh) and len(g.faces):
+            instances.append((np.asarray(transform, np.float64), gname, g))
+    geoms = instances
     notes: list[str] = []
     positions, uvs, colors, indices = [], [], [], []
     meshes: list[Mesh] = []
     materials: list[Material] = [Material(id="flat")] if flat else []
+    mat_cache: dict[str, tuple[int, Any, Any]] = {}
+    image_cache: dict[int, Texture] = {}
     base = first = 0
-    for k, g in enumerate(geoms):
-        v = np.asarray(g.vertices, np.float64)
+    for k, (transform, gname, g) in enumerate(instances):
+        v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]
         f = np.asarray(g.faces, np.int64)
+        if np.linalg.det(transform[:3, :3]) < 0:
+            f = f[:, ::-1]
         n = len(v)
         if flat:
             mat_index, uv, col = 0, None, None
+        elif gname in mat_cache:
+            mat_index, uv, col = mat_cache[gname]
         else:
-            mat, uv, col = _material_of(g, f"source-{k}", notes)
+            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache)
             mat_index = len(materials)
             materials.append(mat)
+            mat_cache[gname] = (mat_index, uv, col)
         positions.append(v.astype(np.float32))
         uvs.append(uv if uv is not None else np.zeros((n, 2), np.float32))
         colors.append(col if col is not None else np.ones((n, 4), np.float32))
@@ -120,6 +150,52 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)
 
 
+def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
+    """The source with every KHR_materials_pbrSpecularGlossiness material read as its diffuse
+    (baseColor = diffuseFactor x diffuseTexture), or None when it has none.
+
+    The renderer draws albedo (factor x texture x vertex colour, no metallic or specular term),
+    and the build stores a spec-gloss material's diffuse as its base colour. trimesh instead
+    converts spec-gloss to metal-rough (KHR's Babylon formula), whose baseColor differs from the
+    diffuse wherever the specular colour is above 0.04 (the default specularFactor is 1): drawn
+    without the metallic term that conversion relies on, it is not the same material. So the
+    reference reads the diffuse, as a spec-gloss renderer's diffuse term does.
+    """
+    import json  # noqa: PLC0415
+    import struct  # noqa: PLC0415
+
+    doc = _gltf_json(path)
+    if doc is None or "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
+        return None
+    for mat in doc.get("materials") or []:
+        sg = (mat.get("extensions") or {}).pop("KHR_materials_pbrSpecularGlossiness", None)
+        if sg is None:
+            continue
+        pbr = mat.setdefault("pbrMetallicRoughness", {})
+        pbr.pop("baseColorTexture", None)
+        pbr["baseColorFactor"] = list(sg.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))
+        if sg.get("diffuseTexture") is not None:
+            pbr["baseColorTexture"] = sg["diffuseTexture"]
+    doc["extensionsUsed"] = [e for e in doc["extensionsUsed"] if e != "KHR_materials_pbrSpecularGlossiness"]
+    doc["extensionsRequired"] = [e for e in doc.get("extensionsRequired") or []
+                                 if e != "KHR_materials_pbrSpecularGlossiness"]
+    js = json.dumps(doc).encode()
+    if path.suffix.lower() == ".gltf":
+        return js, "gltf"
+    data = path.read_bytes()
+    off, blob = 12, b""
+    while off + 8 <= len(data):
+        clen, ctype = struct.unpack_from("<II", data, off)
+        if ctype == 0x004E4942:
+            blob = data[off + 8: off + 8 + clen]
+        off += 8 + clen
+    js += b" " * (-len(js) % 4)
+    chunks = struct.pack("<II", len(js), 0x4E4F534A) + js
+    if blob:
+        chunks += struct.pack("<II", len(blob), 0x004E4942) + blob
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks, "glb"
+
+
 def _gltf_json(path: Path) -> dict[str, Any] | None:
     """The JSON of a .gltf or .glb file (None for other formats or on errors)."""
     import json  # noqa: PLC0415
@@ -135,6 +211,22 @@ def _gltf_json(path: Path) -> dict[str, Any] | None:
                 return json.loads(f.read(length))
     except (OSError, ValueError, struct.error):
         return None
+    return None
+
+
+def uv_caveat(path: Path) -> str | None:
+    """Why the source's uv0 as trimesh reads it is not the build's uv0 (None when it is)."""
+    doc = _gltf_json(path)
+    if doc is None:
+        return None
+    if "KHR_texture_transform" in set(doc.get("extensionsUsed", [])):
+        return "the source uses KHR_texture_transform (baked into the built UVs): UVs not compared"
+    for mat in doc.get("materials") or []:
+        pbr = (mat or {}).get("pbrMetallicRoughness") or {}
+        sg = ((mat or {}).get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}
+        info = pbr.get("baseColorTexture") or sg.get("diffuseTexture") or {}
+        if int(info.get("texCoord", 0) or 0) != 0:
+            return "a base colour texture uses a TEXCOORD other than 0, which trimesh does not read: UVs not compared"
     return None
 
 
@@ -157,6 +249,14 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
         if "KHR_texture_transform" in used:
             colour = False
             notes.append("the source uses KHR_texture_transform, which trimesh ignores: colours not compared")
+        for mat in doc.get("materials") or []:
+            pbr = (mat or {}).get("pbrMetallicRoughness") or {}
+            sg = ((mat or {}).get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}
+            info = pbr.get("baseColorTexture") or sg.get("diffuseTexture") or {}
+            if colour and int(info.get("texCoord", 0) or 0) != 0:
+                colour = False
+                notes.append("a base colour texture uses a TEXCOORD other than 0, which trimesh does not read: "
+                             "colours not compared (the roles check still compares the textures)")
     elif path.suffix.lower() == ".obj":
         try:
             with path.open("rb") as f:

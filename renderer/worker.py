@@ -27,7 +27,7 @@ from typing import Any, BinaryIO
 from assetpipe.core.errors import RenderError
 
 from ._vk import renderer_env
-from .validate import ValidateOptions, ValidationResult
+from .results import ValidateOptions, ValidationResult
 
 READY_TIMEOUT_S = 60.0
 

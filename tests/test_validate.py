@@ -44,8 +44,10 @@ def _ktx(cube: Path) -> Path:
 def test_fixture_passes_every_check() -> None:
     r = validate_model(CUBE, OPTS, isolate=False)
     assert r.passed, r.failures()
-    assert [c.name for c in r.checks] == ["load", "vulkan", "silhouette", "source", "lods", "textures"]
-    assert all(c.status == "pass" for c in r.checks)
+    assert [c.name for c in r.checks] == ["load", "vulkan", "bounds", "silhouette", "source", "uvs", "lods",
+                                          "textures", "roles"]
+    # the fixture's source is an OBJ: texture roles are compared for glTF sources only
+    assert all(c.status == "pass" for c in r.checks if c.name != "roles"), r.to_json()
     sil = r.check("silhouette")
     assert sil is not None and all(v["maxBoxErrorPx"] <= 1.0 for v in sil.figures["views"])
     src = r.check("source")
@@ -103,7 +105,7 @@ def test_black_mip_level_fails(cube: Path) -> None:
     levels[2] = np.zeros_like(levels[2])
     _ktx(cube).write_bytes(mk.ktx2_bytes(levels))
     r = validate_model(cube, OPTS, isolate=False)
-    assert any("level 2 is all black" in m for m in r.check("textures").messages)
+    assert any("levels [2] are all black" in m for m in r.check("textures").messages)
 
 
 def test_bad_lod_fails(cube: Path) -> None:
@@ -151,7 +153,7 @@ def test_batch_in_subprocess_with_reports(tmp_path: Path, cube: Path) -> None:
     write_json_report(results, tmp_path / "report.json")
     write_junit_report(results, tmp_path / "report.xml")
     data = json.loads((tmp_path / "report.json").read_text())
-    assert data["summary"] == {"models": 3, "passed": 1, "failed": 2}
+    assert data["summary"] == {"models": 3, "passed": 1, "failed": 2, "acceptedByBaseline": 0}
     assert ValidationResult.from_json(data["results"][0]).passed
     root = ET.parse(tmp_path / "report.xml").getroot()
     assert root.tag == "testsuites" and int(root.get("failures")) >= 2
@@ -192,3 +194,60 @@ def test_cli_commands(tmp_path: Path) -> None:
     assert res.exit_code != 0
     res = runner.invoke(preview, [str(CUBE), "-o", str(tmp_path / "p.png"), "--size", "64"])
     assert res.exit_code == 0 and (tmp_path / "p.png").is_file()
+
+
+def _shrink_bounds(cube: Path, factor: float) -> None:
+    side_p = cube.with_name("cube.asset.json")
+    side = json.loads(side_p.read_text())
+    c = np.asarray(side["bounds"]["center"])
+    side["bounds"]["max"] = list(c + (np.asarray(side["bounds"]["max"]) - c) * factor)
+    side_p.write_text(json.dumps(side))
+
+
+def test_reports_name_measured_value_and_tolerance(tmp_path: Path, cube: Path) -> None:
+    _shrink_bounds(cube, 0.9)
+    r = validate_model(cube, OPTS, isolate=False)
+    b = r.check("bounds")
+    assert b is not None and b.status == "fail" and b.measured["outsideBox"] > b.tolerance["outsideBox"] == 1e-5
+    write_json_report([r], tmp_path / "r.json")
+    write_junit_report([r], tmp_path / "r.xml")
+    fail = json.loads((tmp_path / "r.json").read_text())["failures"]
+    entry = next(f for f in fail if f["check"] == "bounds")
+    assert entry["model"] == "cube" and entry["tolerance"]["outsideBox"] == 1e-5
+    assert entry["measured"]["outsideBox"] == pytest.approx(b.measured["outsideBox"])
+    case = next(c for c in ET.parse(tmp_path / "r.xml").getroot().iter("testcase") if c.get("name") == "bounds")
+    assert case.find("failure").get("message").startswith("bounds: outsideBox measured ")
+
+
+def test_baseline_accepts_known_differences_and_catches_regressions(tmp_path: Path, cube: Path) -> None:
+    from assetpipe.renderer.baseline import apply_baseline, baseline_of
+
+    _shrink_bounds(cube, 0.9)
+    known = baseline_of([validate_model(cube, OPTS, isolate=False)])["models"]
+    assert set(known["cube"]) == {"bounds", "silhouette"}  # the silhouette exceeds the projected bounds too
+    r = apply_baseline(validate_model(cube, OPTS, isolate=False), known)
+    assert r.passed and r.check("bounds").accepted.startswith("accepted by the baseline")
+    _shrink_bounds(cube, 0.5)  # a regression: the vertices stick out further than accepted
+    r = apply_baseline(validate_model(cube, OPTS, isolate=False), known)
+    assert not r.passed and r.check("bounds").accepted is None and r.check("bounds").status == "fail"
+
+
+def test_cli_json_option_baseline_and_jobs(tmp_path: Path, cube: Path) -> None:
+    from click.testing import CliRunner
+
+    from assetpipe.renderer.cli_commands import validate
+
+    _shrink_bounds(cube, 0.9)
+    runner = CliRunner()
+    base = ["--size", "96", "--checks", "load,bounds,textures"]
+    res = runner.invoke(validate, [str(cube), "--in-process", *base, "--json", str(tmp_path / "a.json"),
+                                   "--write-baseline", str(tmp_path / "base.json")])
+    assert res.exit_code == 1 and "bounds [outsideBox" in res.output, res.output
+    assert json.loads((tmp_path / "a.json").read_text())["summary"]["failed"] == 1
+    res = runner.invoke(validate, [str(cube), str(CUBE), *base, "-j", "2", "--baseline", str(tmp_path / "base.json"),
+                                   "--json-report", str(tmp_path / "b.json")])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "b.json").read_text())
+    assert doc["summary"] == {"models": 2, "passed": 2, "failed": 0, "acceptedByBaseline": 1}
+    res = runner.invoke(validate, ["--list-checks"])
+    assert res.exit_code == 0 and all(f"{n}\n  measures:" in res.output for n in ("load", "roles", "lods"))

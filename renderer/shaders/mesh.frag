@@ -28,6 +28,10 @@ void main() {
         outColor = vec4(1.0);
         return;
     }
+    if (pc.sel.z == 2) {            // facing: red 1 where the nearest surface faces the eye (or is
+        outColor = vec4((gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5, 0.0, 0.0, 1.0);  // double-sided), 0.5 where
+        return;                     // a back face is nearest; alpha 1 wherever anything covers
+    }
     vec3 n = normalize(cross(dFdx(vPos), dFdy(vPos)));
     vec3 toEye = normalize(pc.eye.xyz - vPos);
     if (dot(n, toEye) < 0.0) n = -n;

@@ -1,0 +1,42 @@
+"""Decoding images for the checks once per model: the level-0 file of a texture is usually the
+source image unchanged, so the ``textures`` and ``roles`` checks share one decode (keyed by a
+digest of the bytes). OpenCV decodes straight to an array (no Pillow image + convert copy); Pillow is the
+fallback for what OpenCV does not read (and for palette images with transparency)."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from typing import Any
+
+import numpy as np
+
+
+def decode_rgba(data: bytes, cache: dict[str, Any] | None = None) -> np.ndarray:
+    """(H, W, 4) uint8 RGBA of PNG/JPEG/... ``data`` (16-bit images rounded to 8 bits)."""
+    key = "img:" + hashlib.blake2b(data, digest_size=16).hexdigest()
+    if cache is not None and key in cache:
+        return cache[key]
+    out = None
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or b"PLTE" not in data[:4096]:  # palettes: Pillow handles tRNS right
+        import cv2  # noqa: PLC0415
+
+        arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if arr is not None:
+            if arr.dtype == np.uint16:
+                arr = ((arr.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+            if arr.dtype == np.uint8:
+                if arr.ndim == 2:
+                    out = cv2.cvtColor(arr, cv2.COLOR_GRAY2RGBA)
+                elif arr.shape[2] == 3:
+                    out = cv2.cvtColor(arr, cv2.COLOR_BGR2RGBA)
+                elif arr.shape[2] == 4:
+                    out = cv2.cvtColor(arr, cv2.COLOR_BGRA2RGBA)
+    if out is None:
+        from PIL import Image  # noqa: PLC0415
+
+        with Image.open(io.BytesIO(data)) as im:
+            out = np.asarray(im.convert("RGBA"))
+    if cache is not None:
+        cache[key] = out
+    return out

@@ -1,0 +1,199 @@
+"""``roles``: the texture built in each material role is the source's image for that role.
+
+An independent reading of the source glTF JSON (no importer of ours): material N's
+baseColor (or KHR_materials_pbrSpecularGlossiness diffuse), metallicRoughness, normal,
+occlusion and emissive textures are found by index, their images decoded, area-reduced to the
+size of the KTX2 mip level nearest ``ROLE_PX`` and compared with that level (already in memory:
+no full-size decode of the build's textures). A wrong or swapped texture in any role shows,
+including roles the shaded render does not draw.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..loader import read_ktx2
+from ..results import CheckResult
+from .base import Check, Context
+from .images import decode_rgba
+from .textures import SRGB_TO_LINEAR, VK_SRGB, linear_to_srgb_code
+
+ROLE_PX = 64
+ROLE_PATHS = {
+    "baseColor": (("pbrMetallicRoughness", "baseColorTexture"),
+                  ("extensions", "KHR_materials_pbrSpecularGlossiness", "diffuseTexture")),
+    "metallicRoughness": (("pbrMetallicRoughness", "metallicRoughnessTexture"),),
+    "normal": (("normalTexture",),),
+    "occlusion": (("occlusionTexture",),),
+    "emissive": (("emissiveTexture",),),
+}
+
+
+def _gltf(path: Path) -> tuple[dict[str, Any], bytes | None] | None:
+    data = path.read_bytes()
+    if data[:4] == b"glTF":
+        length = struct.unpack_from("<I", data, 8)[0]
+        off = 12
+        doc, blob = None, None
+        while off + 8 <= min(len(data), length):
+            clen, ctype = struct.unpack_from("<II", data, off)
+            chunk = data[off + 8: off + 8 + clen]
+            if ctype == 0x4E4F534A:
+                doc = json.loads(chunk)
+            elif ctype == 0x004E4942:
+                blob = bytes(chunk)
+            off += 8 + clen
+        return (doc, blob) if doc is not None else None
+    if path.suffix.lower() == ".gltf":
+        return json.loads(data), None
+    return None
+
+
+def _image_bytes(doc: dict[str, Any], blob: bytes | None, root: Path, tex_index: int) -> bytes | None:
+    textures = doc.get("textures") or []
+    if not 0 <= tex_index < len(textures):
+        return None
+    tex = textures[tex_index]
+    src = tex.get("source")
+    if src is None:
+        src = next((e.get("source") for e in (tex.get("extensions") or {}).values()
+                    if isinstance(e, dict) and e.get("source") is not None), None)
+    images = doc.get("images") or []
+    if src is None or not 0 <= src < len(images):
+        return None
+    img = images[src]
+    uri = img.get("uri")
+    if uri:
+        if uri.startswith("data:"):
+            return base64.b64decode(uri.split(",", 1)[1])
+        from urllib.parse import unquote  # noqa: PLC0415
+
+        p = root / unquote(uri)
+        return p.read_bytes() if p.is_file() else None
+    view = (doc.get("bufferViews") or [])[img.get("bufferView", -1)] if img.get("bufferView") is not None else None
+    if view is None:
+        return None
+    buf = (doc.get("buffers") or [{}])[view.get("buffer", 0)]
+    data = blob if buf.get("uri") is None else (
+        base64.b64decode(buf["uri"].split(",", 1)[1]) if buf["uri"].startswith("data:")
+        else (root / buf["uri"]).read_bytes())
+    if data is None:
+        return None
+    o = int(view.get("byteOffset", 0))
+    return data[o:o + int(view["byteLength"])]
+
+
+def _reduce(rgba: np.ndarray, size: tuple[int, int], role: str, fmt: int) -> np.ndarray:
+    """The source image area-averaged to ``size`` (w, h) the way the mip chain filters ``role``; RGB codes."""
+    import cv2  # noqa: PLC0415
+
+    rgb = np.ascontiguousarray(rgba[..., :3])
+    if role == "normal":
+        table = (np.arange(256, dtype=np.float32) * np.float32(2 / 255) - 1).reshape(256, 1)
+        n = cv2.LUT(rgb, np.repeat(table, 3, axis=1).reshape(1, 256, 3))
+        m = cv2.resize(n, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3)
+        m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
+        return (m + 1) * 127.5
+    if fmt == VK_SRGB:
+        lin = cv2.LUT(rgb, np.repeat(SRGB_TO_LINEAR.reshape(256, 1), 3, axis=1).reshape(1, 256, 3))
+        return linear_to_srgb_code(cv2.resize(lin, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3))
+    return cv2.resize(rgba[..., :3].astype(np.float32), size, interpolation=cv2.INTER_AREA).reshape(
+        size[1], size[0], 3)
+
+
+class RolesCheck(Check):
+    name = "roles"
+    measures = ("for each material texture role (baseColor, metallicRoughness, normal, occlusion, emissive): "
+                "mean absolute difference (0..1 of the stored codes, RGB) between the KTX2 mip level nearest "
+                f"{ROLE_PX} px and the source glTF's image for that material and role, area-reduced the same "
+                "way (gamma-correct for sRGB roles, renormalised for normals); a role present in one and not "
+                "the other")
+    tolerance = "role_tolerance 6/255 (0.0235)"
+    reason = ("both sides are area averages of the same texels, so they differ by rounding (at most 1 code per "
+              "level step) and by alpha handling (premultiplied or MASK-scaled chains weigh colour by alpha); "
+              "on the 38 corpus models and 8 generated kinds the worst good texture measured 0.0098 (2.5/255, "
+              "AlphaBlendModeTest: JPEG with alpha), 6/255 leaves 2.4x; two different images of a material "
+              "differ by tens of codes")
+
+    def run(self, ctx: Context) -> CheckResult:
+        r = self.result()
+        model = ctx.model
+        assert model is not None
+        src, _, why = load_source_path(ctx)
+        if src is None or src.suffix.lower() not in (".gltf", ".glb"):
+            r.status = "skip"
+            r.messages.append(why or "the source is not glTF: texture roles not compared")
+            return r.finish()
+        parsed = _gltf(src)
+        if parsed is None:
+            r.status = "skip"
+            r.messages.append("the source glTF does not parse")
+            return r.finish()
+        doc, blob = parsed
+        src_mats = doc.get("materials") or []
+        figures: dict[str, Any] = {}
+        for mat in model.sidecar.get("materials", []):
+            mid = str(mat.get("id", ""))
+            tail = mid.rsplit("-mat-", 1)
+            if len(tail) != 2 or not tail[1].isdigit() or int(tail[1]) >= len(src_mats):
+                continue  # the build's default material
+            smat = src_mats[int(tail[1])]
+            built = mat.get("textures") or {}
+            for role, paths in ROLE_PATHS.items():
+                info = None
+                for path in paths:
+                    node: Any = smat
+                    for k in path:
+                        node = node.get(k) if isinstance(node, dict) else None
+                    if isinstance(node, dict) and node.get("index") is not None:
+                        info = node
+                        break
+                key = f"{mid}/{role}"
+                raw = _image_bytes(doc, blob, src.parent, int(info["index"])) if info else None
+                tex = built.get(role)
+                if info is None and tex is None:
+                    continue
+                if raw is None or tex is None or not tex.get("ktx2"):
+                    if (raw is None) != (tex is None):
+                        r.worst("roleMismatch", 1, 0)
+                        r.messages.append(f"{key}: the source {'has' if raw is not None else 'has no'} texture "
+                                          f"in this role, the build {'has' if tex is not None else 'has none'}")
+                    continue
+                try:
+                    with ctx.timer("compare"):
+                        ktx = read_ktx2((model.root / tex["ktx2"]).read_bytes())
+                        levels = list(ktx.levels)
+                        k = next((i for i, lv in enumerate(levels) if max(lv.shape[:2]) <= ROLE_PX), len(levels) - 1)
+                        lv = np.asarray(levels[k])
+                        rgba = decode_rgba(raw, ctx.cache)
+                        ref = _reduce(rgba, (lv.shape[1], lv.shape[0]), role, int(ktx.vk_format))
+                        d = float(np.abs(ref - lv[..., :3].astype(np.float32)).mean()) / 255.0
+                except Exception as exc:  # noqa: BLE001 - the textures check reports unreadable KTX2s
+                    figures[key] = {"error": str(exc)[:200]}
+                    continue
+                figures[key] = {"level": k, "difference": round(d, 5)}
+                if r.worst("difference", d, ctx.options.role_tolerance):
+                    r.messages.append(f"{key}: the built texture differs from the source's {role} image by "
+                                      f"{d:.3f} (> {ctx.options.role_tolerance:.3f}; wrong or swapped texture?)")
+        r.figures = figures
+        return r.finish()
+
+
+def load_source_path(ctx: Context) -> tuple[Path | None, None, str | None]:
+    """The source path (no import): reuse the source check's lookup."""
+    from .source import find_source  # noqa: PLC0415
+
+    assert ctx.model is not None
+    if "source" in ctx.cache:
+        return ctx.cache["source"][0], None, ctx.cache["source"][2]
+    src = find_source(ctx.model_json, ctx.model.sidecar, ctx.options)
+    return src, None, None if src else "source not found (set source_root)"
+
+
+CHECK = RolesCheck()

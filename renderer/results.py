@@ -1,0 +1,146 @@
+"""The types every check, runner and report shares: options, one check's result, one model's result.
+
+A :class:`CheckResult` carries, besides its messages and figures, ``measured`` and
+``tolerance``: for each quantity the check compares (``"colorDiff"``, ``"blackLevels"``...),
+the worst value measured and the limit it was held to. Reports print them; a baseline
+(:mod:`renderer.baseline`) accepts a failed check when every measured quantity stays within
+the values recorded for that model and check.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from .camera import DEFAULT_VIEW
+
+DEFAULT_VIEWS: tuple[tuple[float, float, float], ...] = (DEFAULT_VIEW, (0.8, -0.3, 0.7), (0.2, -1.0, 0.3))
+
+
+@dataclass
+class ValidateOptions:
+    """Options of the checks; every figure the checks compare against is here (each check's
+    module says why its value is right)."""
+
+    width: int = 256
+    height: int = 256
+    views: tuple[tuple[float, float, float], ...] = DEFAULT_VIEWS
+    checks: tuple[str, ...] = ()  # empty: every registered check
+    validation_layer: bool = True
+    bbox_tolerance_px: float = 2.0
+    source_root: str | None = None  # where to look for the sources (searched recursively)
+    source_max_xor: float = 0.03
+    source_max_unexplained: float = 0.002
+    source_color_tolerance: float = 0.08
+    lod_reference_px: int = 1080
+    lod_reference_fov_deg: float = 60.0
+    lod_max_render_px: int = 512
+    lod_max_unexplained_px: int = 4
+    lod_max_unexplained_fraction: float = 0.002
+    texture_mean_tolerance: float = 0.12
+    texture_png_tolerance: float = 2.0 / 255.0
+    texture_sample_px: int = 256  # image comparisons look at level 0 sampled to at most this size
+    role_tolerance: float = 6.0 / 255.0
+    timeout_s: float = 120.0
+    shader_cache: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ValidateOptions":
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in data.items() if k in names}
+        if "views" in kw:
+            kw["views"] = tuple(tuple(float(c) for c in v) for v in kw["views"])
+        if "checks" in kw:
+            kw["checks"] = tuple(kw["checks"])
+        return cls(**kw)
+
+
+@dataclass
+class CheckResult:
+    """One check: ``status`` is "pass", "fail" or "skip"; ``figures`` are its measurements,
+    ``measured``/``tolerance`` the worst value of each compared quantity and its limit."""
+
+    name: str
+    status: str
+    figures: dict[str, Any] = field(default_factory=dict)
+    messages: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    measured: dict[str, float] = field(default_factory=dict)
+    tolerance: dict[str, float] = field(default_factory=dict)
+    accepted: str | None = None  # set when a baseline accepted this failure (the reason)
+
+    @property
+    def passed(self) -> bool:
+        return self.status != "fail"
+
+    def worst(self, quantity: str, value: float, limit: float) -> bool:
+        """Record ``value`` of ``quantity`` (keeping the largest) against ``limit``; True when over."""
+        value = float(value)
+        if quantity not in self.measured or value > self.measured[quantity]:
+            self.measured[quantity] = value
+        self.tolerance[quantity] = float(limit)
+        return value > limit
+
+    def finish(self) -> "CheckResult":
+        """Set the status from the messages (fail when any) unless skipped; round figures."""
+        if self.status != "skip":
+            self.status = "fail" if self.messages else "pass"
+        self.figures = jsonable(self.figures)
+        self.measured = {k: round(v, 6) for k, v in self.measured.items()}
+        return self
+
+
+@dataclass
+class ValidationResult:
+    """All checks of one model, the notes, and the time split (setup/load/upload/render/compare)."""
+
+    model: str
+    id: str
+    checks: list[CheckResult] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    error: str | None = None  # set when the asset could not be validated at all (crash, timeout)
+
+    @property
+    def passed(self) -> bool:
+        return self.error is None and all(c.passed for c in self.checks)
+
+    def check(self, name: str) -> CheckResult | None:
+        return next((c for c in self.checks if c.name == name), None)
+
+    def failures(self) -> list[str]:
+        """One line per failed check (or the error)."""
+        out = [f"{self.model}: {self.error}"] if self.error else []
+        out += [f"{self.model}: {c.name}: {'; '.join(c.messages) or 'failed'}" for c in self.checks if not c.passed]
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["passed"] = self.passed
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> "ValidationResult":
+        names = {f.name for f in fields(CheckResult)}
+        checks = [CheckResult(**{k: v for k, v in c.items() if k in names}) for c in d.get("checks", [])]
+        return cls(model=d["model"], id=d.get("id", ""), checks=checks, notes=list(d.get("notes", [])),
+                   timings=dict(d.get("timings", {})), error=d.get("error"))
+
+
+def jsonable(x: Any) -> Any:
+    """``x`` with numpy scalars made Python and non-finite floats made strings."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
