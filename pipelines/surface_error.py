@@ -195,11 +195,46 @@ def _closest_on_segment(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarr
     return s + np.clip(t, 0.0, 1.0)[:, None] * d
 
 
+def _seg_dist2(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarray:
+    d = e - s
+    w = p - s
+    dd = np.einsum("ij,ij->i", d, d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.clip(np.einsum("ij,ij->i", w, d) / dd, 0.0, 1.0)
+    t = np.where(dd > 0, t, 0.0)
+    r = w - t[:, None] * d
+    return np.einsum("ij,ij->i", r, r)
+
+
 def _tri_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Exact float64 distance from p to triangle (a, b, c), elementwise: (K,)."""
+    """Exact float64 distance from p to triangle (a, b, c), elementwise: (K,).
+
+    The distance to the plane where p projects inside the triangle, else the nearest of the
+    three edges (also right for degenerate triangles, which are never "inside")."""
     if p.shape[0] == 0:
         return np.zeros(0)
-    return np.linalg.norm(closest_point_on_triangles(p, a, b, c) - p, axis=1)
+    ab, ac, ap = b - a, c - a, p - a
+    d00 = np.einsum("ij,ij->i", ab, ab)
+    d01 = np.einsum("ij,ij->i", ab, ac)
+    d11 = np.einsum("ij,ij->i", ac, ac)
+    d20 = np.einsum("ij,ij->i", ap, ab)
+    d21 = np.einsum("ij,ij->i", ap, ac)
+    det = d00 * d11 - d01 * d01
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = (d11 * d20 - d01 * d21) / det
+        w = (d00 * d21 - d01 * d20) / det
+    # (nearly) degenerate: edges only. Never below the true distance (the edges are part of
+    # the triangle), above it by at most the sliver's width (sin^2 of its angle < 1e-12)
+    inside = (det > 1e-12 * d00 * d11) & (v >= 0) & (w >= 0) & (v + w <= 1)
+    out = np.empty(p.shape[0])
+    if inside.any():
+        q = ap[inside] - v[inside, None] * ab[inside] - w[inside, None] * ac[inside]
+        out[inside] = np.einsum("ij,ij->i", q, q)
+    o = ~inside
+    if o.any():
+        po, ao, bo, co = p[o], a[o], b[o], c[o]
+        out[o] = np.minimum(np.minimum(_seg_dist2(po, ao, bo), _seg_dist2(po, bo, co)), _seg_dist2(po, co, ao))
+    return np.sqrt(out)
 
 
 def covering_radius(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

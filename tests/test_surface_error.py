@@ -285,3 +285,19 @@ def test_bound_against_3m_samples_on_corpus_levels(corpus, model):
         dense = _dense(pos, tri, pos, level, 3_000_000)
         assert e.hausdorff >= dense, (model, ratio)
         assert e.hausdorff <= 1.25 * dense, (model, ratio, e.hausdorff / dense)
+
+
+def test_triangle_distance_matches_closest_point():
+    from assetpipe.pipelines.surface_error import _closest_on_segment, _tri_distance
+
+    rng = np.random.default_rng(9)
+    a, b, c = rng.normal(size=(3, 3000, 3))
+    c[:300] = a[:300] + 0.4 * (b[:300] - a[:300])  # collinear
+    b[300:400] = a[300:400]                        # segment
+    b[400:450] = c[400:450] = a[400:450]           # point
+    p = rng.normal(size=(3000, 3)) * 2
+    ref = np.linalg.norm(closest_point_on_triangles(p, a, b, c) - p, axis=1)
+    # degenerate rows: the exact answer is the nearest of the three segments
+    seg = np.min([np.linalg.norm(_closest_on_segment(p, s, e) - p, axis=1) for s, e in ((a, b), (b, c), (c, a))], axis=0)
+    ref[:450] = seg[:450]
+    np.testing.assert_allclose(_tri_distance(p, a, b, c), ref, rtol=1e-9, atol=1e-12)
