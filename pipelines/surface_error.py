@@ -223,9 +223,9 @@ def _tri_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) ->
     with np.errstate(divide="ignore", invalid="ignore"):
         v = (d11 * d20 - d01 * d21) / det
         w = (d00 * d21 - d01 * d20) / det
-    # (nearly) degenerate: edges only. Never below the true distance (the edges are part of
-    # the triangle), above it by at most the sliver's width (sin^2 of its angle < 1e-12)
-    inside = (det > 1e-12 * d00 * d11) & (v >= 0) & (w >= 0) & (v + w <= 1)
+        # (nearly) degenerate: edges only. Never below the true distance (the edges are part
+        # of the triangle), above it by at most the sliver's width (sin^2 of its angle < 1e-12)
+        inside = (det > 1e-12 * d00 * d11) & (v >= 0) & (w >= 0) & (v + w <= 1)
     out = np.empty(p.shape[0])
     if inside.any():
         q = ap[inside] - v[inside, None] * ab[inside] - w[inside, None] * ac[inside]
