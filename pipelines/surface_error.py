@@ -55,9 +55,13 @@ DEFAULT_TOLERANCE = 0.05
 # Absolute slack (fraction of the diagonal) below which a triangle's bound is settled: lets
 # identical surfaces (true distance 0, float64 rounding ~1e-16) terminate.
 ABS_TOLERANCE = 1e-12
-# Engine queries one direction may spend refining, per triangle of its side, plus a floor.
-DEFAULT_WORK_PER_TRIANGLE = 8.0
+# Engine queries one direction may spend refining: a floor, plus this many per triangle of
+# both meshes, at most DEFAULT_WORK_MAX. A 20k-triangle sphere's level at 1/2 needed 27 per
+# triangle to converge (level -> reference: cells must get smaller than the reference's
+# triangles before the convexity bounds settle them).
+DEFAULT_WORK_PER_TRIANGLE = 32.0
 DEFAULT_WORK_MIN = 20_000
+DEFAULT_WORK_MAX = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -632,7 +636,9 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
 
 
 def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
-             work_per_triangle: float = DEFAULT_WORK_PER_TRIANGLE) -> list[SurfaceError]:
+             work_per_triangle: float | None = None) -> list[SurfaceError]:
+    if work_per_triangle is None:
+        work_per_triangle = DEFAULT_WORK_PER_TRIANGLE
     """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices)."""
     results: list[SurfaceError] = []
     ref_empty = ref.indices.shape[0] == 0
@@ -645,7 +651,8 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
         side = _Side(local, tri)
         used = _used_mask(tri, local.shape[0])
         # reference -> mesh: what the simplification lost
-        work = int(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]))
+        work = int(min(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]),
+                       DEFAULT_WORK_MAX))
         fwd, f_ms = _direction(ref.side, side, used if shared else None, ref.samples,
                                ref.tolerance, work)
         # mesh -> reference: what it added
