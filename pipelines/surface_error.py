@@ -454,33 +454,30 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         lower = max(lower, out.lower)
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         # convexity: d_target <= d_F for any target triangle F, and d_F is convex on T
-        # (candidates tried in turn, each only on the cells still open that it is new to)
+        # (every distinct candidate of every cell, in one batch)
         cand = np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1)  # (K, 5)
-        best_ub = np.full(k, np.inf)
-        for j in range(5):
-            fresh = (ub > thr) & np.all(cand[:, :j] != cand[:, j:j + 1], axis=1)
-            rows = np.flatnonzero(fresh)
-            if not rows.size:
-                continue
-            dist = target.engine.distance_to(v[rows].reshape(-1, 3), np.repeat(cand[rows, j], 3))
-            val = dist.reshape(-1, 3).max(axis=1) * (1.0 + 1e-12)
-            better = val < best_ub[rows]
-            best_ub[rows[better]] = val[better]
-            hint[rows[better]] = cand[rows[better], j]
-            ub[rows] = np.minimum(ub[rows], val)
+        new = np.ones_like(cand, dtype=bool)
+        for j in range(1, 5):
+            new[:, j] = np.all(cand[:, :j] != cand[:, j:j + 1], axis=1)
+        rows, cols = np.nonzero(new)
+        dist = target.engine.distance_to(v[rows].reshape(-1, 3), np.repeat(cand[rows, cols], 3))
+        val = np.full((k, 5), np.inf)
+        val[rows, cols] = dist.reshape(-1, 3).max(axis=1) * (1.0 + 1e-12)
+        best = val.argmin(axis=1)
+        ub = np.minimum(ub, val[np.arange(k), best])
+        hint = cand[np.arange(k), best]
         keep = ub > thr
         if not keep.all():
             settled = max(settled, float(ub[~keep].max()))
             v, d, f, hint, ub, fc = v[keep], d[keep], f[keep], hint[keep], ub[keep], fc[keep]
         # a cell straddling the edge between two target triangles: cut it along the plane
-        # between them and bound each side by its own triangle
-        for j in range(4):
-            if not v.shape[0]:
-                break
-            other = fc if j == 0 else f[:, j - 1]
-            rows = np.flatnonzero(other != hint)
+        # between them and bound each side by its own triangle (all pairs in one batch)
+        if v.shape[0]:
+            others = np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1)
+            rows, cols = np.nonzero(others != hint[:, None])
             if rows.size:
-                ub[rows] = np.minimum(ub[rows], _pair_bound(v[rows], hint[rows], other[rows], target))
+                pb = _pair_bound(v[rows], hint[rows], others[rows, cols], target)
+                np.minimum.at(ub, rows, pb)
             keep = ub > thr
             if not keep.all():
                 settled = max(settled, float(ub[~keep].max()))

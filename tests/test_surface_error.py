@@ -157,7 +157,7 @@ def _blob(n: int = 24, seed: int = 0, bumps: float = 0.15):
     return surf(n), surf(max(n // 3, 4))
 
 
-def _check_bound(ref_pos, ref_tri, pos, tri, n=150_000):
+def _check_bound(ref_pos, ref_tri, pos, tri, n=100_000):
     e = measure_error(ref_pos, ref_tri, pos, tri, samples=2000)
     dense = _dense(ref_pos, ref_tri, pos, tri, n)
     # never below a measurement (float64 rounding of the distances: 1e-12 of the diagonal)
@@ -239,12 +239,12 @@ def test_non_finite_positions_are_refused():
 
 def test_covering_radius_is_exact():
     rng = np.random.default_rng(7)
-    a, b, c = rng.normal(size=(3, 300, 3))
-    c[:50] = a[:50] + 0.3 * (b[:50] - a[:50])  # collinear
-    c[50:60] = a[50:60]                         # a repeated corner
+    a, b, c = rng.normal(size=(3, 120, 3))
+    c[:20] = a[:20] + 0.3 * (b[:20] - a[:20])  # collinear
+    c[20:25] = a[20:25]                         # a repeated corner
     r = covering_radius(a, b, c)
     # brute force: max over a dense barycentric grid of the distance to the nearest corner
-    t = np.linspace(0, 1, 201)
+    t = np.linspace(0, 1, 121)
     u, v = np.meshgrid(t, t)
     keep = u + v <= 1
     u, v = u[keep], v[keep]
@@ -253,7 +253,7 @@ def test_covering_radius_is_exact():
     brute = near.max(axis=1)
     assert np.all(r >= brute * (1 - 1e-12))
     # the grid misses the exact maximiser by at most one grid step's worth
-    step = np.max(np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - a, axis=1)]), axis=0) / 200
+    step = np.max(np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - a, axis=1)]), axis=0) / 120
     assert np.all(r <= brute + 1.5 * step)
     # known values: equilateral (circumradius s / sqrt 3), right triangle (half the hypotenuse)
     eq = covering_radius(np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]]), np.array([[0.5, np.sqrt(3) / 2, 0]]))
