@@ -341,6 +341,16 @@ class _Side:
     positions: np.ndarray            # (N, 3) float64
     tri: np.ndarray                  # (M, 3) int64
     _engine: _Engine | None = None
+    _welded: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def welded(self) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, tri) with vertices at identical positions merged: UV/normal seams
+        split vertices, but two triangles across a seam still share an edge."""
+        if self._welded is None:
+            uniq, inv = np.unique(self.positions, axis=0, return_inverse=True)
+            self._welded = (uniq, inv.reshape(-1)[self.tri])
+        return self._welded
 
     @property
     def engine(self) -> _Engine:
@@ -371,35 +381,49 @@ def _lipschitz_bound(v: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 def _pair_bound(v: np.ndarray, f1: np.ndarray, f2: np.ndarray, target: "_Side") -> np.ndarray:
     """Upper bound of the distance to target over cells v (K, 3, 3), from two target triangles
-    f1, f2 (K,) that share an edge: the cell is cut by the plane through that edge halfway
-    between the triangles' walls; on f1's side ``d <= d_f1``, on the other ``d <= d_f2``, both
-    convex, so each side's maximum is at its polygon's corners (the cell's corners on that
-    side and the cut points on its edges). inf where f1, f2 share no edge. Valid for any plane;
-    the bisecting one makes it exact across a flat or gently folded edge."""
+    f1, f2 (K,): the cell is cut by a plane; on f1's side ``d <= d_f1``, on the other
+    ``d <= d_f2``, both convex, so each side's maximum is at its polygon's corners (the cell's
+    corners on that side and the cut points on its edges). Valid for any plane. Triangles
+    sharing an edge (also across a seam of split vertices) are cut by the plane through it
+    halfway between their walls: exact across a flat or gently folded edge. Others (two
+    sheets of a thin part) by the mid-plane of their points nearest to the cell's centroid."""
     k = v.shape[0]
     out = np.full(k, np.inf)
-    t1, t2 = target.tri[f1], target.tri[f2]
-    eq = t1[:, :, None] == t2[:, None, :]
-    in2 = eq.any(axis=2)  # (K, 3): which of f1's corners f2 has too
-    ok = (in2.sum(axis=1) == 2) & (f1 != f2)
-    if not ok.any():
+    keep = f1 != f2
+    if not keep.any():
         return out
-    idx = np.flatnonzero(ok)
-    t1, t2, in2, vv = t1[idx], t2[idx], in2[idx], v[idx]
-    order = np.argsort(~in2, axis=1, kind="stable")  # the two shared corners first
-    rows = np.arange(idx.shape[0])
-    P = target.positions
-    e0, e1, o1 = P[t1[rows, order[:, 0]]], P[t1[rows, order[:, 1]]], P[t1[rows, order[:, 2]]]
-    o2 = P[t2[rows, np.argmin((t2[:, :, None] == t1[:, None, :]).any(axis=2), axis=1)]]
-    ed = e1 - e0
-    ed = ed / np.maximum(np.linalg.norm(ed, axis=1, keepdims=True), 1e-300)
-    def wall(o):  # unit in-plane normal of the edge, pointing into the triangle (e0, e1, o)
-        w = (o - e0) - np.einsum("ij,ij->i", o - e0, ed)[:, None] * ed
-        return w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
-    m = wall(o1) - wall(o2)
-    s = np.einsum("kij,kj->ki", vv - e0[:, None], m)  # (K', 3) signed, >= 0: f1's side
+    idx = np.flatnonzero(keep)
+    fa, fb, vv = f1[idx], f2[idx], v[idx]
+    n = idx.shape[0]
+    P, wtri = target.welded
+    t1, t2 = wtri[fa], wtri[fb]
+    in2 = (t1[:, :, None] == t2[:, None, :]).any(axis=2)  # which of f1's corners f2 has too
+    edge = in2.sum(axis=1) == 2
+    origin = np.empty((n, 3))
+    m = np.empty((n, 3))
+    if edge.any():
+        r = np.flatnonzero(edge)
+        u1, u2, i2 = t1[r], t2[r], in2[r]
+        order = np.argsort(~i2, axis=1, kind="stable")  # the two shared corners first
+        rr = np.arange(r.shape[0])
+        e0, e1, o1 = P[u1[rr, order[:, 0]]], P[u1[rr, order[:, 1]]], P[u1[rr, order[:, 2]]]
+        o2 = P[u2[rr, np.argmin((u2[:, :, None] == u1[:, None, :]).any(axis=2), axis=1)]]
+        ed = e1 - e0
+        ed = ed / np.maximum(np.linalg.norm(ed, axis=1, keepdims=True), 1e-300)
+
+        def wall(o):  # unit in-plane normal of the edge, pointing into the triangle (e0, e1, o)
+            w = (o - e0) - np.einsum("ij,ij->i", o - e0, ed)[:, None] * ed
+            return w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
+        origin[r], m[r] = e0, wall(o1) - wall(o2)
+    if (~edge).any():
+        r = np.flatnonzero(~edge)
+        c = vv[r].mean(axis=1)
+        eng = target.engine
+        q1 = closest_point_on_triangles(c, eng.a[fa[r]], eng.b[fa[r]], eng.c[fa[r]])
+        q2 = closest_point_on_triangles(c, eng.a[fb[r]], eng.b[fb[r]], eng.c[fb[r]])
+        origin[r], m[r] = 0.5 * (q1 + q2), q1 - q2
+    s = np.einsum("kij,kj->ki", vv - origin[:, None], m)  # (n, 3) signed, >= 0: f1's side
     side1 = s >= 0
-    fa, fb = f1[idx], f2[idx]
     pts = vv.reshape(-1, 3)
     d1 = target.engine.distance_to(pts, np.repeat(fa, 3)).reshape(-1, 3)
     d2 = target.engine.distance_to(pts, np.repeat(fb, 3)).reshape(-1, 3)
@@ -414,7 +438,7 @@ def _pair_bound(v: np.ndarray, f1: np.ndarray, f2: np.ndarray, target: "_Side") 
     c1 = target.engine.distance_to(x, np.repeat(fa, 3)).reshape(-1, 3)
     c2 = target.engine.distance_to(x, np.repeat(fb, 3)).reshape(-1, 3)
     best = np.maximum(best, np.where(cut, np.maximum(c1, c2), 0.0).max(axis=1))
-    good = np.isfinite(best) & np.all(np.isfinite(m), axis=1)
+    good = np.isfinite(best) & np.all(np.isfinite(m), axis=1) & np.any(m != 0, axis=1)
     out[idx] = np.where(good, best * (1.0 + 1e-12), np.inf)
     return out
 
