@@ -1,6 +1,7 @@
 """The recorded LOD error (a proven upper bound) against dense sampled measurements.
 
 Run:  .venv/bin/python benchmarks/error_bound.py                  (the default model set)
+      .venv/bin/python benchmarks/error_bound.py --engines        (closest-point engines only)
       .venv/bin/python benchmarks/error_bound.py --only Duck,spider --dense 1000000,3000000
 
 Per corpus mesh (loaded with trimesh, merged, node transforms applied) and level ratio (1/2,
@@ -97,12 +98,54 @@ def dense(ref: se.Reference, level: np.ndarray, counts: list[int], seed: int = 1
     return [max(dv, float(da[:c].max()), float(db[:c].max())) * ref.scale for c in counts]
 
 
+def engines(name: str = "stanford-bunny", queries: int = 50_000) -> None:
+    """Closest-point engines that import here: one mesh, near-surface queries, build included
+    (best of 3, CPU seconds). Candidates not installed are skipped."""
+    loaded = load_merged(CORPUS / MODELS[name])
+    pos, tri = loaded[0], loaded[1].astype(np.int64)
+    lo, hi = pos.min(0), pos.max(0)
+    pos = (pos - (lo + hi) / 2) / np.linalg.norm(hi - lo)
+    rng = np.random.default_rng(0)
+    q = pos[rng.integers(0, len(pos), queries)] + rng.normal(size=(queries, 3)) * 1e-3
+
+    def fcpw_engine():
+        return se._Engine(pos, tri).query(q)[0]
+
+    def pcu_engine():
+        import point_cloud_utils as pcu
+        return pcu.closest_points_on_mesh(q, pos, tri.astype(np.int32))[0]
+
+    def igl_engine():
+        import igl
+        return np.sqrt(igl.point_mesh_squared_distance(q, pos, tri)[0])
+
+    ref = None
+    print(f"engines: {name}, {len(tri)} triangles, {queries} queries, build included (CPU s)")
+    for label, fn in (("fcpw (+ float64 recheck)", fcpw_engine), ("point-cloud-utils", pcu_engine),
+                      ("libigl", igl_engine)):
+        try:
+            best = math.inf
+            for _ in range(3):
+                c0 = time.process_time()
+                d = np.asarray(fn(), np.float64)
+                best = min(best, time.process_time() - c0)
+        except ImportError:
+            print(f"  {label:26s} not installed")
+            continue
+        ref = d if ref is None else ref
+        print(f"  {label:26s} {best:7.3f} s   max |d - fcpw| {np.abs(d - ref).max():.2e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", default=",".join(list(MODELS)[:8]),
                     help="comma-separated model names (default: all but the two largest)")
     ap.add_argument("--dense", default="1000000,3000000", help="sample counts of the dense measurements")
+    ap.add_argument("--engines", action="store_true", help="time the closest-point engines only")
     args = ap.parse_args()
+    if args.engines:
+        engines()
+        return
     counts = [int(c) for c in args.dense.split(",")]
     rows = []
     lab = [f"{c / 1e6:g}M" for c in counts]
