@@ -7,7 +7,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate and repeated OBJ faces dropped (#13);
            # 4: meta has the bounding-box centre (--recenter)
 MESH = 3  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates
-LOD = 3  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack
+LOD = 4  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound
 TEXTURE = 1
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
@@ -17,7 +17,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 
 
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-          "point-cloud-utils", "fast-simplification", "mapbox_earcut")
+          "fcpw", "fast-simplification", "mapbox_earcut")
 _cached: dict | None = None
 _memo_dir = None  # the build's cache folder (use_cache_dir); None: the default one
 
