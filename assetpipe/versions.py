@@ -6,7 +6,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 
 IMPORT = 2  # 2: geometry-only blob
 MESH = 2  # 2: non-finite UVs cleaned before tangents are derived
-LOD = 3  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack
+LOD = 4  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
 TEXTURE = 1
 ENCODE = 1
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

@@ -53,14 +53,21 @@ sys.path.insert(0, str(REPO))
 from assetpipe.pipelines import simplify as simp  # noqa: E402
 from assetpipe.pipelines.lod import (  # noqa: E402
     DEFAULT_LOD_OPTIONS, LodOptions, build_lod_chain, weld_for_simplification)
+from assetpipe.pipelines.lod_model import build_model_lods  # noqa: E402
 from assetpipe.pipelines.surface_error import (  # noqa: E402
     ZERO_ERROR as ZERO, measure_against, measure_levels, prepare_reference)
 
 GLTFPACK_LOCAL = REPO / ".venv" / "node" / "node_modules" / ".bin" / "gltfpack"
-CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", REPO.parent / "shared" / "corpus")) / "models"
+GLTFPACK_MAIN = Path("/work/main/.venv/node/node_modules/.bin/gltfpack")
+_SHARED = REPO.parent / "shared" / "corpus"
+CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", _SHARED if _SHARED.is_dir() else "/work/shared/corpus")) / "models"
 RESULTS = REPO / "benchmarks" / "results"
 RATIOS = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
 SIMPLIFIERS = ("meshopt", "meshopt-attr", "meshopt+lock_border", "sloppy", "fast-simplification")
+#: our variants in the comparison with gltfpack: the default; levels only from the level above;
+#: only from level 0; and the way the build made them before merging (one chain per mesh)
+VARIANTS = {"ours": {}, "ours-chained": {"chain": "chained"}, "ours-direct": {"chain": "direct"},
+            "ours-per-mesh": {"merge_meshes": False, "chain": "chained", "dedupe_triangles": False}}
 MIN_TRIANGLES = 300  # corpus files below this are too small to say anything
 
 
@@ -161,15 +168,17 @@ def run_simplifier(kind: str, pos32, welded, target, uv, normals):
 def find_gltfpack() -> str | None:
     """gltfpack on PATH, else the one npm installed beside the venv."""
     found = shutil.which("gltfpack")
-    if found is None and GLTFPACK_LOCAL.exists():
-        found = str(GLTFPACK_LOCAL)
+    for local in (GLTFPACK_LOCAL, GLTFPACK_MAIN):
+        if found is None and local.exists():
+            found = str(local)
     return found
 
 
 def load_build_meshes(path: Path):
-    """The file as the build's LOD step sees it: one (positions f64, indices u32, uv f32|None)
-    per mesh, after import and mesh processing with the default options (assetpipe.steps)."""
+    """The file as the build's LOD step sees it: one :class:`LodPart` per mesh, after import
+    and mesh processing with the default options (assetpipe.steps task_lod)."""
     from assetpipe.model_import import import_model
+    from assetpipe.pipelines.lod_model import LodPart
     from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS
     from assetpipe.pipelines.mesh_process import process_mesh
 
@@ -178,30 +187,38 @@ def load_build_meshes(path: Path):
     for a in layout:
         cols[a] = slice(c, c + ATTRIBUTE_COMPONENTS[a])
         c += ATTRIBUTE_COMPONENTS[a]
+    model = import_model(path)
     out = []
-    for mesh in import_model(path).meshes:
+    for mesh in model.meshes:
         pm = process_mesh(mesh, DEFAULT_MESH_OPTIONS)
         if pm.indices.shape[0] == 0:
             continue
         v = pm.vertices
         uv = v[:, cols["uv0"]] if "uv0" in cols and mesh.uv0 is not None else None
         normals = v[:, cols["normal"]] if "normal" in cols else None
-        out.append((v[:, :3], pm.indices, uv, normals))
+        others = tuple(v[:, cols[a]] for a in layout if a not in ("position", "normal")
+                       and not (a == "uv0" and uv is not None))
+        exact = tuple(v[:, cols[a]] for a in layout if a not in ("position", "normal", "tangent"))
+        mat = model.materials[mesh.material] if 0 <= mesh.material < len(model.materials) else None
+        out.append(LodPart(vertices=v, positions=v[:, :3].astype(np.float64), indices=pm.indices,
+                           uv=uv, normals=normals, others=others, exact=exact,
+                           group_key=(mesh.material, uv is not None),
+                           double_sided=bool(mat.double_sided) if mat is not None else False))
     return out
 
 
-def union_levels(build, per_mesh):
-    """(all positions, level k of every mesh concatenated, for each k).
+def union_levels(meshes, depth: int | None = None):
+    """(all positions f64, level k of every output mesh concatenated, for each k).
 
-    per_mesh: for each mesh of ``build``, its levels' (K, 3) index arrays, finest first. A mesh
-    whose chain stopped early contributes its coarsest level to the deeper levels."""
+    meshes: :class:`LodMesh` list. A mesh whose chain stopped early contributes its coarsest
+    level to the deeper levels."""
     pos, offsets, off = [], [], 0
-    for p, *_ in build:
-        pos.append(p), offsets.append(off)
-        off += len(p)
-    depth = max(len(lv) for lv in per_mesh)
-    levels = [np.concatenate([lv[min(k, len(lv) - 1)].astype(np.int64) + o
-                              for lv, o in zip(per_mesh, offsets)]) for k in range(depth)]
+    for m in meshes:
+        pos.append(np.asarray(m.vertices[:, :3], np.float64)), offsets.append(off)
+        off += len(m.vertices)
+    depth = depth or max(len(m.levels) for m in meshes)
+    levels = [np.concatenate([m.levels[min(k, len(m.levels) - 1)].indices.astype(np.int64) + o
+                              for m, o in zip(meshes, offsets)]) for k in range(depth)]
     return np.concatenate(pos), levels
 
 
@@ -211,7 +228,7 @@ def gltfpack_run(exe: str, src: Path, ratio: float, tmp: Path):
     out = tmp / f"gp-{ratio:.4f}.glb"
     t = time.perf_counter()
     r = subprocess.run([exe, "-i", str(src), "-o", str(out), "-si", f"{ratio}", "-se", "1",
-                        "-noq"], capture_output=True, text=True)
+                        "-sv", "-noq"], capture_output=True, text=True)
     dt = time.perf_counter() - t
     if r.returncode != 0 or not out.exists():
         return None
@@ -225,7 +242,8 @@ def main() -> int:
     ap.add_argument("--only", help="comma-separated corpus folder names")
     ap.add_argument("--no-big", action="store_true", help="skip the generated 1M-triangle mesh")
     ap.add_argument("--no-gltfpack", action="store_true")
-    ap.add_argument("--samples", type=int, default=DEFAULT_LOD_OPTIONS.error_samples)
+    ap.add_argument("--samples", type=int, default=1_000_000,
+                    help="area samples per side of the comparison measurements (1M by default)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
 
@@ -250,7 +268,7 @@ def main() -> int:
         trimesh.Trimesh(big[0], big[1], process=False).export(str(big_path))
         meshes.append(("torus-1M (generated)", big_path, big))
 
-    rows, chains, compare = [], [], []
+    rows, chains, compare, recorded = [], [], [], []
     print(f"{'mesh':24} {'simplifier':20} {'ratio':>6} {'tris':>8} {'ms':>9} {'Mtri/s':>7} "
           f"{'haus%':>8} {'rms%':>8}")
     for name, path, (pos, tri, uv, normals) in meshes:
@@ -283,11 +301,13 @@ def main() -> int:
                 outs.append(out)
             for r, out, dt, err in zip(RATIOS, outs, times, measure_levels(ref, outs)):
                 emit(kind, r, len(out), dt, err)
-        # --- as the build does it: one chain per mesh
+        # --- as the build does it: the model's meshes (build_model_lods), against the whole model
         build = load_build_meshes(path)
-        bpos = np.concatenate([b[0] for b in build])
-        bref = prepare_reference(bpos, union_levels(build, [[b[1]] for b in build])[1][0],
-                                 samples=args.samples)
+        bpos = np.concatenate([b.positions for b in build])
+        offs = np.cumsum([0] + [len(b.positions) for b in build])
+        bidx = np.concatenate([b.indices.astype(np.int64) + o for b, o in zip(build, offs)])
+        bref = prepare_reference(bpos, bidx, samples=args.samples)
+        m_build = len(bidx)
         if gltfpack:
             gp = []
             for r in RATIOS:
@@ -300,38 +320,53 @@ def main() -> int:
                 emit("gltfpack", r, len(gtri), dt, gerr)
                 gp.append((r, len(gtri), gerr))
             if gp:
-                # ours at gltfpack's triangle counts: every mesh's chain at gltfpack's ratios
-                ratios = (1.0, *[max(g / m0, 1e-9) for _, g, _ in gp])
-                opts = LodOptions(ratios=ratios, min_triangles=1, error_samples=args.samples)
-                chains_eq = [build_lod_chain(p, i, uv=u, normals=nn, options=opts) for p, i, u, nn in build]
-                _, levels = union_levels(build, [[x.indices for x in ch.levels] for ch in chains_eq])
-                errs = measure_levels(bref, levels[1:])
-                for k, ((r, g, gerr), lv, oerr) in enumerate(zip(gp, levels[1:], errs), start=1):
-                    compare.append(dict(mesh=name, ratio=r, meshes=len(build), gltfpack_triangles=g,
-                                        our_triangles=len(lv), gltfpack_hausdorff_pct=100 * gerr.hausdorff_rel,
-                                        our_hausdorff_pct=100 * oerr.hausdorff_rel,
-                                        gltfpack_rms_pct=100 * gerr.rms_rel, our_rms_pct=100 * oerr.rms_rel,
-                                        our_sloppy_meshes=sum(any(x.sloppy for x in ch.levels[:k + 1])
-                                                              for ch in chains_eq)))
-        # the whole chain per mesh, default options: with and without measurement
-        t_chain = t_simplify = 0.0
-        built = []
-        for p, i, u, nn in build:
-            t = time.perf_counter()
-            built.append(build_lod_chain(p, i, uv=u, normals=nn, options=LodOptions(error_samples=args.samples)))
-            t_chain += time.perf_counter() - t
-            t = time.perf_counter()
-            build_lod_chain(p, i, uv=u, normals=nn, options=LodOptions(error_samples=args.samples, measure=False))
-            t_simplify += time.perf_counter() - t
-        _, levels = union_levels(build, [[x.indices for x in ch.levels] for ch in built])
-        errs = measure_levels(bref, levels[1:])
-        m_build = sum(len(b[1]) for b in build)
-        chains.append(dict(mesh=name, meshes=len(build), input_triangles=m_build, seconds=t_chain,
-                           seconds_without_measuring=t_simplify,
+                # ours at gltfpack's triangle counts: each output mesh at gltfpack's ratios,
+                # no error budget (a cell compares equal counts)
+                ratios = (1.0, *[max(g / m_build, 1e-9) for _, g, _ in gp])
+                for variant, extra in VARIANTS.items():
+                    opts = LodOptions(ratios=ratios, min_triangles=1, max_error=None,
+                                      error_samples=min(args.samples, DEFAULT_LOD_OPTIONS.error_samples),
+                                      **extra)
+                    t = time.perf_counter()
+                    lm = build_model_lods(build, opts)
+                    dt = time.perf_counter() - t
+                    upos, levels = union_levels(lm, len(ratios))
+                    errs = measure_against(bref, [(upos, lv) for lv in levels[1:]])
+                    for k, ((r, g, gerr), lv, oerr) in enumerate(zip(gp, levels[1:], errs), start=1):
+                        emit(variant, r, len(lv), dt, oerr)
+                        compare.append(dict(mesh=name, variant=variant, ratio=r, meshes=len(build),
+                                            output_meshes=len(lm), gltfpack_triangles=g,
+                                            our_triangles=len(lv), gltfpack_hausdorff_pct=100 * gerr.hausdorff_rel,
+                                            our_hausdorff_pct=100 * oerr.hausdorff_rel,
+                                            gltfpack_rms_pct=100 * gerr.rms_rel, our_rms_pct=100 * oerr.rms_rel,
+                                            chain_seconds=dt))
+        # the build's own chains (default options): recorded error against a dense measurement
+        t = time.perf_counter()
+        built = build_model_lods(build, LodOptions())
+        t_chain = time.perf_counter() - t
+        t = time.perf_counter()
+        build_model_lods(build, LodOptions(measure=False))
+        t_simplify = time.perf_counter() - t
+        for j, m in enumerate(built):
+            if len(m.levels) < 2:
+                continue
+            mref = prepare_reference(m.vertices[:, :3].astype(np.float64), m.levels[0].indices,
+                                     samples=args.samples, seed=12345)
+            dense = measure_levels(mref, [lv.indices for lv in m.levels[1:]])
+            for lv, d in zip(m.levels[1:], dense):
+                recorded.append(dict(mesh=name, output_mesh=j, level=lv.level, triangles=lv.triangles,
+                                     copy=m.copy_of is not None,
+                                     recorded_pct=100 * lv.hausdorff_rel, dense_pct=100 * d.hausdorff_rel,
+                                     ratio=lv.hausdorff_rel / d.hausdorff_rel if d.hausdorff_rel > 0 else math.nan))
+        upos, levels = union_levels(built)
+        errs = measure_against(bref, [(upos, lv) for lv in levels[1:]])
+        chains.append(dict(mesh=name, meshes=len(build), output_meshes=len(built),
+                           distinct=sum(m.copy_of is None for m in built), input_triangles=m_build,
+                           seconds=t_chain, seconds_without_measuring=t_simplify,
                            levels=" ".join(str(len(lv)) for lv in levels),
-                           hausdorff_pct=" ".join(f"{100 * e.hausdorff_rel:.4f}" for e in [ZERO, *errs]),
-                           sloppy_meshes=sum(any(x.sloppy for x in ch.levels) for ch in built)))
-        print(f"{name[:24]:24} chain ({len(build)} meshes) {chains[-1]['levels']}  Hausdorff% "
+                           hausdorff_pct=" ".join(f"{100 * e.hausdorff_rel:.4f}" for e in [ZERO, *errs])))
+        print(f"{name[:24]:24} chain ({len(build)} meshes -> {len(built)}, "
+              f"{chains[-1]['distinct']} distinct) {chains[-1]['levels']}  Hausdorff% "
               f"{chains[-1]['hausdorff_pct']}  {t_chain:.2f} s ({m_build / t_chain / 1e6:.2f} M input tri/s; "
               f"{m_build / t_simplify / 1e6:.2f} M/s without measuring)", flush=True)
 
@@ -344,26 +379,49 @@ def main() -> int:
 
     print()
     print("median over meshes and ratios (time per input triangle, Hausdorff and RMS % of diagonal):")
-    for kind in (*SIMPLIFIERS, "gltfpack"):
+    for kind in (*SIMPLIFIERS, "gltfpack", *VARIANTS):
         sel = [r for r in rows if r["simplifier"] == kind]
         if sel:
             print(f"  {kind:20} {np.median([1e9 * r['seconds'] / r['input_triangles'] for r in sel]):8.1f} ns/tri"
                   f"  haus {np.median([r['hausdorff_pct'] for r in sel]):7.4f}%"
                   f"  rms {np.median([r['rms_pct'] for r in sel]):8.5f}%")
     if compare:
-        wins = sum(c["our_hausdorff_pct"] <= c["gltfpack_hausdorff_pct"] + 1e-9 for c in compare)
-        print(f"our Hausdorff <= gltfpack's at equal triangle count: {wins}/{len(compare)} cells "
-              f"= {100 * wins / len(compare):.0f}% (goal >= 90%; ours per mesh, as the build)")
-        over = [c for c in compare if c["our_triangles"] > 1.05 * c["gltfpack_triangles"]]
-        print(f"cells where our count exceeds gltfpack's by > 5%: {len(over)}")
-        for c in over:
-            print(f"  count: {c['mesh']} 1/{round(1 / c['ratio'])}: ours {c['our_triangles']} vs "
-                  f"gltfpack {c['gltfpack_triangles']}")
-        for c in compare:
-            if c["our_hausdorff_pct"] > c["gltfpack_hausdorff_pct"] + 1e-9:
-                print(f"  worse: {c['mesh']} 1/{round(1 / c['ratio'])}: ours {c['our_hausdorff_pct']:.4f}% "
-                      f"({c['our_triangles']} tris) vs gltfpack {c['gltfpack_hausdorff_pct']:.4f}% "
-                      f"({c['gltfpack_triangles']} tris)")
+        print()
+        print("TABLE 1: Hausdorff at equal triangle count, ours / gltfpack (-si R -se 1 -sv -noq), "
+              f"{args.samples} samples per side")
+        variants = list(VARIANTS)
+        cells = sorted({(c["mesh"], c["ratio"]) for c in compare})
+        by = {(c["mesh"], c["ratio"], c["variant"]): c for c in compare}
+        print(f"  {'mesh':28} {'ratio':>6} {'gp tris':>8} {'gp haus%':>9} " +
+              " ".join(f"{v:>14}" for v in variants))
+        for mesh, r in cells:
+            c0 = by[(mesh, r, variants[0])]
+            print(f"  {mesh[:28]:28} 1/{round(1 / r):<4} {c0['gltfpack_triangles']:8d} "
+                  f"{c0['gltfpack_hausdorff_pct']:9.4f} " + " ".join(
+                      f"{by[(mesh, r, v)]['our_hausdorff_pct'] / max(c0['gltfpack_hausdorff_pct'], 1e-12):8.2f}x"
+                      f"{'*' if by[(mesh, r, v)]['our_triangles'] > 1.05 * c0['gltfpack_triangles'] else ' '}     "
+                      for v in variants))
+        print("  (* our count > 1.05x gltfpack's)")
+        for v in variants:
+            sel = [c for c in compare if c["variant"] == v]
+            ok = sum(c["our_hausdorff_pct"] <= 1.1 * c["gltfpack_hausdorff_pct"] + 1e-9 for c in sel)
+            print(f"  {v:14} within 1.1x gltfpack: {ok}/{len(sel)} cells = {100 * ok / len(sel):.0f}% "
+                  f"(goal >= 90%); median ratio "
+                  f"{np.median([c['our_hausdorff_pct'] / max(c['gltfpack_hausdorff_pct'], 1e-12) for c in sel]):.2f}")
+    if recorded:
+        print()
+        print(f"TABLE 2: recorded Hausdorff of every level (the build's chains) against a dense "
+              f"{args.samples}-sample measurement (other seed)")
+        print(f"  {'mesh':28} {'out':>4} {'lvl':>3} {'tris':>8} {'recorded%':>10} {'dense%':>10} {'rec/dense':>9}")
+        for r in recorded:
+            print(f"  {r['mesh'][:28]:28} {r['output_mesh']:4d} {r['level']:3d} {r['triangles']:8d} "
+                  f"{r['recorded_pct']:10.4f} {r['dense_pct']:10.4f} {r['ratio']:9.3f}"
+                  f"{'  copy' if r['copy'] else ''}")
+        ratios_ = np.array([r["ratio"] for r in recorded if math.isfinite(r["ratio"])])
+        if ratios_.size:
+            print(f"  recorded/dense: min {ratios_.min():.3f}, median {np.median(ratios_):.3f}, "
+                  f"max {ratios_.max():.3f}; below the dense value: {int((ratios_ < 1).sum())}/{ratios_.size}")
+        _write_csv(args.out / "lod-recorded.csv", recorded)
     else:
         print("gltfpack not run (not on PATH or --no-gltfpack): no comparison")
     total_in = sum(c["input_triangles"] for c in chains)
