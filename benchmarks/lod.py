@@ -242,6 +242,8 @@ def main() -> int:
     ap.add_argument("--only", help="comma-separated corpus folder names")
     ap.add_argument("--no-big", action="store_true", help="skip the generated 1M-triangle mesh")
     ap.add_argument("--no-gltfpack", action="store_true")
+    ap.add_argument("--no-simplifiers", action="store_true",
+                    help="skip the per-simplifier table (meshopt, sloppy, fast-simplification, ...)")
     ap.add_argument("--samples", type=int, default=1_000_000,
                     help="area samples per side of the comparison measurements (1M by default)")
     ap.add_argument("--out", type=Path, default=RESULTS)
@@ -279,7 +281,7 @@ def main() -> int:
         diag = float(np.linalg.norm(hi - lo))
         pos32 = ((pos - (lo + hi) / 2) / diag).astype(np.float32)
         welded = weld_for_simplification(tri, pos, uv, normals)
-        ref = prepare_reference(pos, tri, samples=args.samples)
+        ref = None if args.no_simplifiers else prepare_reference(pos, tri, samples=args.samples)
 
         def emit(kind, ratio, out_tri, seconds, err):
             row = dict(mesh=name, simplifier=kind, ratio=ratio, input_triangles=m0,
@@ -291,7 +293,7 @@ def main() -> int:
                   f"{row['mtris_per_s']:7.2f} {row['hausdorff_pct']:8.4f} {row['rms_pct']:8.5f}",
                   flush=True)
 
-        for kind in SIMPLIFIERS:
+        for kind in () if args.no_simplifiers else SIMPLIFIERS:
             outs, times = [], []
             for r in RATIOS:
                 target = max(1, int(round(r * m0)))

@@ -1,11 +1,15 @@
 """LOD chains with measured error.
 
 :func:`build_lod_chain` turns one mesh into a chain of index buffers over the *same* vertex
-array: level 0 is the input unchanged, each coarser level is simplified from the previous one
-(so each is a simplification of every finer level), and each level's error is *measured*
-against level 0 (:mod:`pipelines.surface_error`), so errors accumulate honestly down the chain.
-:func:`reorder_for_lod_prefix` then permutes the vertices so that each level uses a prefix of
-the vertex range (the ``vertexCount`` of the sidecar's ``lods`` entries, docs/FORMAT.md).
+array: level 0 is the input unchanged; each coarser level is simplified both from the level
+above and from level 0 (``LodOptions.chain``), and the one with the lower *measured* error
+against level 0 (:mod:`pipelines.surface_error`) is kept. Neither always wins
+(benchmarks/lod.py, variants ours-chained and ours-direct): a chain accumulates error, while
+a stalled step can do better from the level above.
+No level moves or adds a vertex, so every level indexes level 0's vertices and
+:func:`reorder_for_lod_prefix` can still permute the vertices so that each level uses a prefix
+of the vertex range (the ``vertexCount`` of the sidecar's ``lods`` entries, docs/FORMAT.md).
+A level whose measured error exceeds ``max_error`` is not emitted.
 
 Local frame
 -----------
@@ -16,8 +20,8 @@ and the same relative errors; errors in model units are scaled back.
 
 Monotonic error
 ---------------
-Each level is measured against level 0 with the *same* fixed reference sample set (seeded),
-and simplified from the level above, so measured errors normally grow down the chain. They
+Each level is measured against level 0 with the *same* fixed reference (prepared once), so
+measured errors normally grow down the chain. They
 are reported exactly as measured. A coarser level *can* measure slightly lower than a finer
 one: the mesh-side samples differ per level, and a further collapse can genuinely remove a
 deviation the level above had (the true Hausdorff distance is not monotonic under
