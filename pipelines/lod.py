@@ -40,7 +40,9 @@ import numpy as np
 
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
-from assetpipe.pipelines.surface_error import Reference, SurfaceError, local_frame, measure_levels, prepare_reference
+from assetpipe.pipelines.surface_error import (
+    Reference, SurfaceError, local_frame, measure_levels, points_to_mesh_distance, prepare_reference,
+    sample_surface)
 
 #: Bump when the output of this step changes for the same input and options (cache key).
 
@@ -196,14 +198,57 @@ def _unique(cands: list[_Candidate]) -> list[_Candidate]:
     return out
 
 
-def _measure(ref: Reference | None, cands: list[_Candidate]) -> list[SurfaceError | None]:
-    if ref is None or not cands:
+#: area samples a side for comparing candidates (besides the vertices): enough to rank them
+ESTIMATE_SAMPLES = 8192
+
+
+class _Estimator:
+    """A quick *sampled* two-sided Hausdorff distance to level 0, used only to choose among
+    candidates (chained or direct, pruned, sloppy): ``n`` area samples a side plus the used
+    vertices, exact point-to-triangle distances. It is a lower value of the true distance;
+    the recorded error of the chosen level is the bound of :func:`measure_levels`, computed
+    once per emitted level. Choosing by the bound instead doubled the measuring time of
+    chain="best" (Duck, 5 levels: 12.4 s against 6.5 s chained, under load)."""
+
+    def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int) -> None:
+        self.local, self.idx, self.n, self.seed = local, idx, n, seed
+        used = np.zeros(local.shape[0], bool)
+        used[idx.reshape(-1)] = True
+        self.used = used
+        self.pts = np.concatenate([sample_surface(local, idx, n, seed), local[used]])
+
+    def __call__(self, cands: list[_Candidate]) -> list[float]:
+        if not cands:
+            return []
+        back, sizes, fwd = [], [], []
+        for c in cands:
+            tri = c[0]
+            fwd.append(float(points_to_mesh_distance(self.pts, self.local, tri).max()))
+            used = np.zeros(self.local.shape[0], bool)
+            used[tri.reshape(-1)] = True
+            # vertices shared with level 0 are on it (distance 0): only the others
+            p = np.concatenate([sample_surface(self.local, tri, self.n, self.seed + 1),
+                                self.local[used & ~self.used]])
+            back.append(p)
+            sizes.append(p.shape[0])
+        d = points_to_mesh_distance(np.concatenate(back), self.local, self.idx)
+        out, start = [], 0
+        for f, k in zip(fwd, sizes):
+            out.append(max(f, float(d[start:start + k].max()) if k else 0.0))
+            start += k
+        return out
+
+
+def _measure(est: _Estimator | None, cands: list[_Candidate]) -> list[float | None]:
+    if est is None or not cands:
         return [None] * len(cands)
-    return list(measure_levels(ref, [c[0] for c in cands]))
+    if len(cands) == 1:
+        return [math.nan]  # nothing to choose: no estimate needed
+    return est(cands)
 
 
-def _cost(c: _Candidate, e: SurfaceError | None) -> float:
-    return e.hausdorff_rel if e is not None else c[1]
+def _cost(c: _Candidate, e: float | None) -> float:
+    return e if e is not None and not math.isnan(e) else c[1]
 
 
 def build_lod_chain(
@@ -255,10 +300,12 @@ def build_lod_chain(
     # of identical vertices): duplicates would act as seams and block collapses.
     welded = weld_for_simplification(idx, pos, uv, normals, other_attributes,
                                      options.weld_normal_seams)
-    # The fixed reference every level is measured against, prepared once.
-    ref = None
+    # Candidates are compared by a quick sampled estimate; the chosen levels are measured
+    # (bounded) against the reference at the end, in one batch.
+    est = None
     if options.measure and m0 > 0:
-        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
+        est = _Estimator(local, idx.astype(np.int64), min(options.samples_for(m0), ESTIMATE_SAMPLES),
+                         options.error_seed + 101)
     error_targets = options.error_targets()
     chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
     direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"
@@ -276,7 +323,7 @@ def build_lod_chain(
             break
         if error_targets is not None:
             best = _error_targeted(pos32, welded, chosen, float(step), max_allowed, scale32,
-                                   attrs, weights, options, ref, chained, direct)
+                                   attrs, weights, options, est, chained, direct)
             if best is None:
                 break
         else:
@@ -287,13 +334,13 @@ def build_lod_chain(
             if chained:
                 cands += _candidates(pos32, prev, k_prev, prev_err, target, simp.NO_ERROR_LIMIT,
                                      attrs, weights, options)
-            if direct and k_prev > 0:
+            if direct and (k_prev > 0 or not chained):
                 cands += _candidates(pos32, welded, 0, 0.0, target, simp.NO_ERROR_LIMIT,
                                      attrs, weights, options)
             cands = [c for c in _unique(cands) if 0 < c[0].shape[0] <= max_allowed]
             if not cands:
                 break
-            errs = _measure(ref, cands)
+            errs = _measure(est, cands)
             slack = options.sloppy_slack * target
             within = [i for i, c in enumerate(cands) if c[0].shape[0] <= slack]
             if within:
@@ -301,9 +348,22 @@ def build_lod_chain(
             else:
                 i = min(range(len(cands)), key=lambda i: (cands[i][0].shape[0], i))
             best = (cands[i], errs[i])
-        if best[1] is not None and not best[1].hausdorff_rel <= budget:
-            break  # over the error budget: not emitted, and coarser levels would be worse
+        e = best[1]
+        if e is not None and not math.isnan(e) and not e <= budget:
+            break  # over the error budget even by the estimate (a lower value): not emitted
         chosen.append(best)
+
+    # --- measure every chosen level against level 0 (one prepared reference, one batch)
+    measured: list[SurfaceError | None] = [None] * len(chosen)
+    if est is not None and len(chosen) > 1:
+        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
+        measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]])
+        for k in range(1, len(chosen)):
+            target = error_targets[k] if error_targets is not None else math.inf
+            if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):
+                chosen, measured = chosen[:k], measured[:k]  # over the budget (or target)
+                break
+    chosen = [(c, m) for (c, _), m in zip(chosen, measured)]
 
     ppu = options.pixels_per_unit_at_unit_distance()
     levels = [LodLevel(0, idx, m0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
@@ -323,13 +383,19 @@ def build_lod_chain(
     return LodChain(levels=tuple(levels), diagonal=diag)
 
 
+#: the sampled estimate must be this far within an error target, so that the bound measured
+#: afterwards (at most 1 + the measurement tolerance above the truth) stays within it too
+TARGET_MARGIN = 0.85
+
+
 def _error_targeted(pos32, welded, chosen, target_rel: float, max_allowed: int, scale32: float,
-                    attrs, weights, options: LodOptions, ref: Reference | None,
+                    attrs, weights, options: LodOptions, est: _Estimator | None,
                     chained: bool, direct: bool):
-    """The level with the fewest triangles whose measured Hausdorff distance is within
-    ``target_rel`` (fraction of the diagonal): meshoptimizer's error limit starts at the
-    target and is halved (up to 6 times) while no candidate measures within it. Without a
-    reference (``measure`` off) the simplifier's own estimate decides."""
+    """The level with the fewest triangles whose estimated Hausdorff distance is within
+    ``TARGET_MARGIN`` x ``target_rel`` (fraction of the diagonal): meshoptimizer's error
+    limit starts at the target and is halved (up to 6 times) while no candidate is. Without
+    measuring the simplifier's own estimate decides. The level's bound is checked against
+    the target afterwards (the chain ends at a level over it)."""
     (prev, prev_err, _, _), _ = chosen[-1]
     k_prev = len(chosen) - 1
     # meshopt's error is relative to the extent (largest side), ours to the diagonal
@@ -339,14 +405,14 @@ def _error_targeted(pos32, welded, chosen, target_rel: float, max_allowed: int, 
         if chained:
             cands += _candidates(pos32, prev, k_prev, prev_err, options.min_triangles, limit,
                                  attrs, weights, options)
-        if direct and k_prev > 0:
+        if direct and (k_prev > 0 or not chained):
             cands += _candidates(pos32, welded, 0, 0.0, options.min_triangles, limit,
                                  attrs, weights, options)
         cands = [c for c in _unique(cands) if 0 < c[0].shape[0] <= max_allowed]
         if not cands:
             return None  # even the loosest limit saves too little
-        errs = _measure(ref, cands)
-        ok = [i for i, c in enumerate(cands) if _cost(c, errs[i]) <= target_rel]
+        errs = est(cands) if est is not None else [None] * len(cands)
+        ok = [i for i, c in enumerate(cands) if _cost(c, errs[i]) <= TARGET_MARGIN * target_rel]
         if ok:
             i = min(ok, key=lambda i: (cands[i][0].shape[0], _cost(cands[i], errs[i]), i))
             return cands[i], errs[i]

@@ -213,3 +213,28 @@ def test_build_output_identical_across_runs_and_jobs(corpus, tmp_path):
                      if p.is_file() and ".assetpipe" not in p.parts})
     assert outs[0].keys() == outs[1].keys() and outs[0] == outs[1]
     assert any(k.endswith(".asset.json") for k in outs[0])
+
+
+def test_new_options_validated():
+    from assetpipe.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="chain mode"):
+        LodOptions(chain="sideways")
+    with pytest.raises(ConfigError, match="budget"):
+        LodOptions(max_error=0.0)
+    with pytest.raises(ConfigError, match="screen sizes"):
+        LodOptions(target_screen_sizes=(0.0, 10.0, 100.0))
+    assert LodOptions(target_screen_sizes=(0.0, 400.0, 100.0)).error_targets() == (0.0, 1 / 400, 1 / 100)
+
+
+def test_best_keeps_the_lower_measured_level():
+    """chain="best" measures a level made from the level above and one made from level 0 and
+    keeps the lower; each level says which (from_level)."""
+    v, f = _bumpy_sphere(4)
+    best = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=None))
+    assert {lv.from_level for lv in best.levels[2:]} <= {0} | {lv.level - 1 for lv in best.levels[2:]}
+    assert all(lv.from_level == 0 for lv in best.levels[:2])
+    direct = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=None, chain="direct"))
+    # level 2 sees the same two candidates whenever level 1 matches: best <= direct there
+    if best.levels[1].indices.tobytes() == direct.levels[1].indices.tobytes():
+        assert best.levels[2].hausdorff_rel <= direct.levels[2].hausdorff_rel + 1e-12
