@@ -26,6 +26,7 @@ from typing import Hashable, Sequence
 
 import numpy as np
 
+from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
 
@@ -91,19 +92,26 @@ def dedupe_triangles(indices: np.ndarray, positions: np.ndarray, double_sided: b
     if tri.shape[0] < 2:
         return np.ascontiguousarray(tri, dtype=np.uint32)
     pos = np.ascontiguousarray(np.asarray(positions, dtype=np.float64).reshape(-1, 3))
-    # position id per vertex: identical rows get one id
-    _, pid = np.unique(pos.view(np.dtype((np.void, 24))).reshape(-1), return_inverse=True)
-    t = pid.reshape(-1)[tri.astype(np.int64)]
+    # corners at one position get one index (the first vertex there; meshoptimizer's hash
+    # remap: np.unique over position rows took 4.7 s of 9.8 on MetalRoughSpheres' 1M triangles)
+    t = simp.weld_identical(tri, pos).astype(np.int64)
     key = np.sort(t, axis=1)
     # winding class: parity of the permutation from sorted order (rotations keep it)
     parity = ((t[:, 0] > t[:, 1]).astype(np.int64) + (t[:, 0] > t[:, 2]) + (t[:, 1] > t[:, 2])) & 1
     degenerate = (key[:, 0] == key[:, 1]) | (key[:, 1] == key[:, 2])
-    cols = [key[:, 0], key[:, 1], key[:, 2]] if double_sided else [key[:, 0], key[:, 1], key[:, 2], parity]
-    rows = np.stack(cols, axis=1)
-    # degenerate triangles get a unique key each (their own index), so none is dropped
-    rows[degenerate] = -1 - np.arange(int(degenerate.sum()))[:, None]
-    _, first = np.unique(rows, axis=0, return_index=True)
-    keep = np.sort(first)
+    live = np.flatnonzero(~degenerate)  # degenerate triangles are left alone
+    k = key[live]
+    if pos.shape[0] < (1 << 21):  # one uint64 per triangle: 3 x 21 bits + the parity bit
+        code = ((k[:, 0].astype(np.uint64) << np.uint64(43)) | (k[:, 1].astype(np.uint64) << np.uint64(22))
+                | (k[:, 2].astype(np.uint64) << np.uint64(1)))
+        if not double_sided:
+            code |= parity[live].astype(np.uint64)
+        _, first = np.unique(code, return_index=True)
+    else:
+        rows = k if double_sided else np.concatenate([k, parity[live, None]], axis=1)
+        _, first = np.unique(rows, axis=0, return_index=True)
+    keep = degenerate.copy()
+    keep[live[first]] = True
     return np.ascontiguousarray(tri[keep], dtype=np.uint32)
 
 
