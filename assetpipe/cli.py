@@ -23,7 +23,8 @@ def main() -> None:
 
 
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
-                   lock_border: bool, max_texture_size: int | None, recenter: bool = False):
+                   lock_border: bool, max_texture_size: int | None, recenter: bool = False,
+                   lod_max_error: float | None = None, lod_screen_sizes: str | None = None):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
     import dataclasses
 
@@ -43,9 +44,13 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                 changes["simplifier"] = simplifier
             if lock_border:
                 changes["lock_border"] = True
+            if lod_max_error is not None:
+                changes["max_error"] = lod_max_error if lod_max_error > 0 else None
+            if lod_screen_sizes:
+                changes["target_screen_sizes"] = (0.0, *(float(x) for x in lod_screen_sizes.split(",")))
             lod = dataclasses.replace(d.lod, **changes)
         texture = dataclasses.replace(d.texture, max_size=max_texture_size) if max_texture_size else d.texture
-    except (ValueError, TypeError) as exc:
+    except (ValueError, TypeError, AssetpipeError) as exc:  # ConfigError: an option out of range
         raise click.BadParameter(str(exc)) from None
     return BuildOptions(mesh=mesh, lod=lod, texture=texture)
 
@@ -75,6 +80,12 @@ def eval_ratio(text: str) -> float:
 @click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None,
               help=f"LOD simplifier [default: {_D.lod.simplifier}].")
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
+@click.option("--lod-max-error", type=float, default=None,
+              help=f"LOD error budget, a fraction of the mesh's diagonal: a level whose measured error exceeds it is "
+                   f"not written; 0 for no budget [default: {_D.lod.max_error:g}].")
+@click.option("--lod-screen-sizes", default=None,
+              help="Make LOD levels for these on-screen sizes (pixels the mesh's diagonal spans, decreasing, "
+                   "e.g. '400,100,25') instead of ratios: each level's error is at most one pixel at its size.")
 @click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
               help="Downsize textures so neither side exceeds this (power of two steps).")
 @click.option("--recenter", is_flag=True,
@@ -87,7 +98,9 @@ def eval_ratio(text: str) -> float:
               help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
                    "double), checked from its header before decoding.")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-          simplifier, lock_border, max_texture_size, recenter, max_output_mb, max_image_pixels) -> None:
+def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
+          simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
+          max_image_pixels) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
     import dataclasses
 
@@ -95,7 +108,8 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout,
     from assetpipe.build_types import BuildLimits
     from assetpipe.progress import Reporter
 
-    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter)
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
+                             lod_max_error, lod_screen_sizes)
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))

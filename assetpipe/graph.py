@@ -406,8 +406,11 @@ class Graph:
                 jobs.append(([a], "lod", kin, (steps.task_lod_handmade, str(self.store.root), blobs, lod_opts)))
                 continue
             blob = a.records["mesh"]["blobs"]["mesh"]
-            kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout})
-            jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, layout, lod_opts)))
+            imp = a.records["import"]["meta"]  # double-sided materials keep reversed twins apart
+            sided = [bool(imp["materials"][m]["doubleSided"]) if 0 <= m < len(imp["materials"]) else False
+                     for m in imp["meshMaterials"]]
+            kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout, "doubleSided": sided})
+            jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, layout, lod_opts, sided)))
         self._run_phase(jobs)
 
     def _kept_levels(self, a: AssetState) -> list[list[int]] | None:

@@ -190,9 +190,13 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
 
 # -- LOD ------------------------------------------------------------------------------------
 
-def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None) -> dict:
-    """LOD chain per mesh, vertices reordered so that coarser levels use a prefix."""
-    from assetpipe.pipelines.lod import LodOptions, build_lod_chain, reorder_for_lod_prefix
+def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None,
+             double_sided: list[bool] | None = None) -> dict:
+    """LOD chains of a model (pipelines/lod_model.py): meshes sharing a material and format
+    merged, duplicate triangles dropped, affine copies simplified once, vertices reordered so
+    that coarser levels use a prefix. ``double_sided[i]``: mesh i's material is double-sided."""
+    from assetpipe.pipelines.lod import LodOptions
+    from assetpipe.pipelines.lod_model import LodPart, build_model_lods
     from assetpipe.pipelines.mesh_process import ATTRIBUTE_COMPONENTS
 
     store = Store(Path(store_root))
@@ -206,29 +210,46 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
         cols[name] = slice(c, c + ATTRIBUTE_COMPONENTS[name])
         c += ATTRIBUTE_COMPONENTS[name]
     out_arrays, out_meta = {}, []
-    for i, m in enumerate(meta["meshes"]):
-        verts, idx = arrays[f"{i}.vertices"], arrays[f"{i}.indices"]
-        if opts is None or idx.shape[0] == 0:
-            levels_meta = [{"error": None, "switchDistance": 0.0, "vertexCount": int(verts.shape[0])}]
+    if opts is None:
+        for i, m in enumerate(meta["meshes"]):
+            verts, idx = arrays[f"{i}.vertices"], arrays[f"{i}.indices"]
             out_arrays[f"{i}.vertices"] = verts
             out_arrays[f"{i}.lod0"] = idx
-        else:
+            out_meta.append({**m, "lods": [{"error": None, "switchDistance": 0.0,
+                                            "vertexCount": int(verts.shape[0])}]})
+    else:
+        parts = []
+        for i, m in enumerate(meta["meshes"]):
+            verts, idx = arrays[f"{i}.vertices"], arrays[f"{i}.indices"]
             uv = verts[:, cols["uv0"]] if "uv0" in cols and m.get("hasUv") else None
             normals = verts[:, cols["normal"]] if "normal" in cols else None
             # every other written attribute, so welding for simplification never merges
             # vertices that differ in something the simplifier does not weigh
             others = tuple(verts[:, cols[a]] for a in layout if a not in ("position", "normal")
                            and not (a == "uv0" and uv is not None))
-            chain = build_lod_chain(verts[:, :3], idx, uv=uv, normals=normals, other_attributes=others,
-                                    options=opts)
-            order = reorder_for_lod_prefix([lv.indices for lv in chain.levels], verts.shape[0])
-            out_arrays[f"{i}.vertices"] = verts[order.order]
+            exact = tuple(verts[:, cols[a]] for a in layout
+                          if a not in ("position", "normal", "tangent"))
+            parts.append(LodPart(vertices=verts, positions=verts[:, :3], indices=idx, uv=uv,
+                                 normals=normals, others=others, exact=exact,
+                                 group_key=(m["material"], bool(m.get("hasUv"))),
+                                 double_sided=bool(double_sided[i]) if double_sided else False))
+        for j, lm in enumerate(build_model_lods(parts, opts)):
+            ms = [meta["meshes"][i] for i in lm.parts]
+            out_arrays[f"{j}.vertices"] = lm.vertices
             levels_meta = []
-            for k, (lv, new_idx, count) in enumerate(zip(chain.levels, order.indices, order.vertex_counts)):
-                out_arrays[f"{i}.lod{k}"] = new_idx
+            for k, (lv, count) in enumerate(zip(lm.levels, lm.vertex_counts)):
+                out_arrays[f"{j}.lod{k}"] = lv.indices
                 levels_meta.append({"error": lv.error_json() if k else None, "sloppy": lv.sloppy,
                                     "switchDistance": lv.switch_distance, "vertexCount": count})
-        out_meta.append({**m, "lods": levels_meta})
+            first = ms[0]
+            entry = {**first, "degenerate": sum(x["degenerate"] for x in ms),
+                     "welded": sum(x["welded"] for x in ms),
+                     "warnings": [w for x in ms for w in x["warnings"]], "lods": levels_meta}
+            if len(ms) > 1:
+                entry["parts"] = [x["name"] for x in ms]
+            if lm.duplicates:
+                entry["duplicateTriangles"] = lm.duplicates
+            out_meta.append(entry)
     blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
     return {"blobs": {"lod": blob},
             "meta": {"switchDistances": [[lv["switchDistance"] for lv in m["lods"]] for m in out_meta]}}

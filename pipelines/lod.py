@@ -1,11 +1,15 @@
 """LOD chains with measured error.
 
 :func:`build_lod_chain` turns one mesh into a chain of index buffers over the *same* vertex
-array: level 0 is the input unchanged, each coarser level is simplified from the previous one
-(so each is a simplification of every finer level), and each level's error is *measured*
-against level 0 (:mod:`pipelines.surface_error`), so errors accumulate honestly down the chain.
-:func:`reorder_for_lod_prefix` then permutes the vertices so that each level uses a prefix of
-the vertex range (the ``vertexCount`` of the sidecar's ``lods`` entries, docs/FORMAT.md).
+array: level 0 is the input unchanged; each coarser level is simplified both from the level
+above and from level 0 (``LodOptions.chain``), and the one with the lower *measured* error
+against level 0 (:mod:`pipelines.surface_error`) is kept. Neither always wins
+(benchmarks/lod.py, variants ours-chained and ours-direct): a chain accumulates error, while
+a stalled step can do better from the level above.
+No level moves or adds a vertex, so every level indexes level 0's vertices and
+:func:`reorder_for_lod_prefix` can still permute the vertices so that each level uses a prefix
+of the vertex range (the ``vertexCount`` of the sidecar's ``lods`` entries, docs/FORMAT.md).
+A level whose measured error exceeds ``max_error`` is not emitted.
 
 Local frame
 -----------
@@ -16,8 +20,8 @@ and the same relative errors; errors in model units are scaled back.
 
 Monotonic error
 ---------------
-Each level is measured against level 0 with the *same* fixed reference sample set (seeded),
-and simplified from the level above, so measured errors normally grow down the chain. They
+Each level is measured against level 0 with the *same* fixed reference (prepared once), so
+measured errors normally grow down the chain. They
 are reported exactly as measured. A coarser level *can* measure slightly lower than a finer
 one: the mesh-side samples differ per level, and a further collapse can genuinely remove a
 deviation the level above had (the true Hausdorff distance is not monotonic under
@@ -36,7 +40,9 @@ import numpy as np
 
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
-from assetpipe.pipelines.surface_error import Reference, SurfaceError, local_frame, measure_levels, prepare_reference
+from assetpipe.pipelines.surface_error import (
+    Reference, SurfaceError, local_frame, measure_levels, points_to_mesh_distance, prepare_reference,
+    sample_surface)
 
 #: Bump when the output of this step changes for the same input and options (cache key).
 
@@ -54,7 +60,8 @@ class LodLevel:
     switch_distance: view distance (model units) from which this level's error projects to
       at most one pixel: max Hausdorff of levels 0..k * (resolution/2) / tan(fov/2).
     sloppy: whether the sloppy fallback made this level. Sloppy clustering ignores UV seams
-      and borders, so this level and every coarser one (simplified from it) may have cracks.
+      and borders, so this level (and any level simplified from it) may have cracks.
+    from_level: the level it was simplified from (``level - 1``: chained; 0: direct).
     """
 
     level: int
@@ -67,6 +74,7 @@ class LodLevel:
     rms_rel: float
     switch_distance: float
     sloppy: bool = False
+    from_level: int = 0  # the level this one was simplified from (the level above, or 0)
 
     def error_json(self) -> dict[str, float]:
         """The sidecar's ``error`` object (docs/FORMAT.md)."""
@@ -126,10 +134,18 @@ def _non_manifold_edges(tri: np.ndarray) -> int:
 
 def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOptions,
                 n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Attribute columns and weights for meshoptimizer. UVs are shifted to 0 and divided by
+    the larger side of their bounding box (float64 first), so the weight does not depend on
+    the UV scale: tiled UVs (x100, x1e4) weigh as much as UVs in [0, 1]."""
     cols, weights = [], []
     if uv is not None and opts.uv_weight > 0:
-        u = np.asarray(uv, dtype=np.float32).reshape(n, 2)
-        cols.append(u)
+        u = np.asarray(uv, dtype=np.float64).reshape(n, 2)
+        u = np.where(np.isfinite(u), u, 0.0)
+        if n:
+            lo = u.min(axis=0)
+            extent = float((u.max(axis=0) - lo).max())
+            u = (u - lo) / extent if extent > 0 else u - lo
+        cols.append(u.astype(np.float32))
         weights += [opts.uv_weight] * 2
     if normals is not None and opts.normal_weight > 0:
         cols.append(np.asarray(normals, dtype=np.float32).reshape(n, 3))
@@ -139,48 +155,100 @@ def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOpti
     return np.concatenate(cols, axis=1), np.asarray(weights, np.float32)
 
 
-def _simplify_step(pos32: np.ndarray, idx: np.ndarray, target: int, target_error: float,
-                   attrs: np.ndarray | None, weights: np.ndarray | None,
-                   opts: LodOptions, ref: Reference | None
-                   ) -> tuple[np.ndarray, float, bool, SurfaceError | None]:
-    """One level from ``idx``: (indices, simplifier error, sloppy, measured error or None).
+_Candidate = tuple  # (indices (K, 3) uint32, simplifier error, sloppy, from level)
 
-    The regular simplifier runs first. When it stops above ``sloppy_slack`` x the target
-    (topology allows no more collapses), the alternatives are tried from the same level:
-    meshoptimizer's component pruning (keeps seams closed) and, with ``sloppy_fallback``, the
-    sloppy simplifier. Of the results within the slack, the one with the lowest *measured*
-    Hausdorff distance to level 0 wins (``ref`` given), else the lowest simplifier estimate;
-    when none gets within the slack, the one with the fewest triangles.
-    """
+
+def _candidates(pos32: np.ndarray, src: np.ndarray, src_level: int, src_err: float, target: int,
+                target_error: float, attrs: np.ndarray | None, weights: np.ndarray | None,
+                opts: LodOptions) -> list[_Candidate]:
+    """Simplifications of ``src`` towards ``target`` triangles.
+
+    The regular simplifier first. When it stops above ``sloppy_slack`` x the target
+    (topology allows no more collapses), meshoptimizer's component pruning (keeps seams
+    closed) and, with ``sloppy_fallback``, the sloppy simplifier are tried too. The caller
+    picks by measured error. Simplifier errors are summed along the chain (an estimate)."""
     if opts.simplifier == "fast-simplification":
-        out, err = simp.simplify_fast(pos32, idx, target, preserve_border=opts.lock_border)
-        return out, err, False, None
-    out, err = simp.simplify(pos32, idx, target, attributes=attrs, attribute_weights=weights,
+        out, err = simp.simplify_fast(pos32, src, target, preserve_border=opts.lock_border)
+        return [(out, src_err + err, False, src_level)]
+    out, err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
                              lock_border=opts.lock_border, target_error=target_error)
-    slack = opts.sloppy_slack * target
-    if opts.target_errors is not None or out.shape[0] <= slack or opts.lock_border:
-        return out, err, False, None
-    cands = [(out, err, False)]
-    p_out, p_err = simp.simplify(pos32, idx, target, attributes=attrs, attribute_weights=weights,
+    cands = [(out, src_err + err, False, src_level)]
+    if target_error < simp.NO_ERROR_LIMIT or out.shape[0] <= opts.sloppy_slack * target \
+            or opts.lock_border:
+        return cands
+    p_out, p_err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
                                  target_error=target_error, prune=True)
     if p_out.shape[0] > 0:
-        cands.append((p_out, p_err, False))
+        cands.append((p_out, src_err + p_err, False, src_level))
     if opts.sloppy_fallback:
-        s_out, s_err = simp.simplify_sloppy(pos32, idx, target, cleanup=True)
+        s_out, s_err = simp.simplify_sloppy(pos32, src, target, cleanup=True)
         if s_out.shape[0] > 0:
-            cands.append((s_out, s_err, True))
-    measured: list[SurfaceError | None] = [None] * len(cands)
-    if ref is not None:
-        measured = list(measure_levels(ref, [c[0] for c in cands]))
-    within = [i for i, c in enumerate(cands) if c[0].shape[0] <= slack]
-    if within:
-        def cost(i: int) -> float:
-            m = measured[i]
-            return m.hausdorff_rel if m is not None else cands[i][1]
-        best = min(within, key=lambda i: (cost(i), cands[i][0].shape[0]))
-    else:
-        best = min(range(len(cands)), key=lambda i: cands[i][0].shape[0])
-    return (*cands[best], measured[best])
+            cands.append((s_out, src_err + s_err, True, src_level))
+    return cands
+
+
+def _unique(cands: list[_Candidate]) -> list[_Candidate]:
+    """Drop candidates whose index buffer equals an earlier one's (same result, one measure)."""
+    seen, out = set(), []
+    for c in cands:
+        key = (c[0].shape, c[0].tobytes())
+        if key not in seen:
+            seen.add(key)
+            out.append(c)
+    return out
+
+
+#: area samples a side for comparing candidates (besides the vertices): enough to rank them
+ESTIMATE_SAMPLES = 8192
+
+
+class _Estimator:
+    """A quick *sampled* two-sided Hausdorff distance to level 0, used only to choose among
+    candidates (chained or direct, pruned, sloppy): ``n`` area samples a side plus the used
+    vertices, exact point-to-triangle distances. It is a lower value of the true distance;
+    the recorded error of the chosen level is the bound of :func:`measure_levels`, computed
+    once per emitted level. Choosing by the bound instead doubled the measuring time of
+    chain="best" (Duck, 5 levels: 12.4 s against 6.5 s chained, under load)."""
+
+    def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int) -> None:
+        self.local, self.idx, self.n, self.seed = local, idx, n, seed
+        used = np.zeros(local.shape[0], bool)
+        used[idx.reshape(-1)] = True
+        self.used = used
+        self.pts = np.concatenate([sample_surface(local, idx, n, seed), local[used]])
+
+    def __call__(self, cands: list[_Candidate]) -> list[float]:
+        if not cands:
+            return []
+        back, sizes, fwd = [], [], []
+        for c in cands:
+            tri = c[0]
+            fwd.append(float(points_to_mesh_distance(self.pts, self.local, tri).max()))
+            used = np.zeros(self.local.shape[0], bool)
+            used[tri.reshape(-1)] = True
+            # vertices shared with level 0 are on it (distance 0): only the others
+            p = np.concatenate([sample_surface(self.local, tri, self.n, self.seed + 1),
+                                self.local[used & ~self.used]])
+            back.append(p)
+            sizes.append(p.shape[0])
+        d = points_to_mesh_distance(np.concatenate(back), self.local, self.idx)
+        out, start = [], 0
+        for f, k in zip(fwd, sizes):
+            out.append(max(f, float(d[start:start + k].max()) if k else 0.0))
+            start += k
+        return out
+
+
+def _measure(est: _Estimator | None, cands: list[_Candidate]) -> list[float | None]:
+    if est is None or not cands:
+        return [None] * len(cands)
+    if len(cands) == 1:
+        return [math.nan]  # nothing to choose: no estimate needed
+    return est(cands)
+
+
+def _cost(c: _Candidate, e: float | None) -> float:
+    return e if e is not None and not math.isnan(e) else c[1]
 
 
 def build_lod_chain(
@@ -208,12 +276,16 @@ def build_lod_chain(
     Returns:
       :class:`LodChain`; ``levels[0]`` holds ``indices`` unchanged (errors 0). Every level's
       ``indices`` is (K, 3) uint32 into ``positions``; triangle counts strictly decrease by at
-      least ``min_saving``; no level is empty. The input arrays are not modified.
+      least ``min_saving``; no level is empty; with ``options.max_error`` no level's measured
+      Hausdorff distance exceeds it. The input arrays are not modified.
 
     Before simplifying, vertices identical in position, UV, ``other_attributes`` and (unless
     ``options.weld_normal_seams``) normal are welded (:func:`pipelines.simplify.weld_identical`): levels 1+ use the first vertex of
     each identical set, which renders the same and lets the simplifier collapse across
     duplicates instead of treating them as seams.
+
+    Each level is made (``options.chain``) from the level above, from level 0, or from both
+    with the lower measured Hausdorff distance kept (``from_level`` says which).
     """
     idx = np.ascontiguousarray(np.asarray(indices).reshape(-1, 3), dtype=np.uint32)
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
@@ -224,62 +296,128 @@ def build_lod_chain(
     if options.simplifier == "meshopt-attr":
         attrs, weights = _attributes(uv, normals, options, n)
 
-    # --- simplify: each level from the previous one. Identical duplicate vertices are welded
-    # first (levels 1+ then use the first of each set of identical vertices): duplicates would
-    # act as seams and block collapses.
+    # Identical duplicate vertices are welded first (levels 1+ then use the first of each set
+    # of identical vertices): duplicates would act as seams and block collapses.
     welded = weld_for_simplification(idx, pos, uv, normals, other_attributes,
                                      options.weld_normal_seams)
-    # The fixed reference every level is measured against; prepared first, because a step
-    # whose simplifier stalls picks among its alternatives by measured error.
-    ref = None
+    # Candidates are compared by a quick sampled estimate; the chosen levels are measured
+    # (bounded) against the reference at the end, in one batch.
+    est = None
     if options.measure and m0 > 0:
-        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
-    raw: list[tuple[np.ndarray, float, bool]] = [(welded, 0.0, False)]
-    known: dict[int, SurfaceError] = {}  # level -> error already measured while choosing
-    steps = options.target_errors if options.target_errors is not None else options.ratios
-    cumulative = 0.0
+        est = _Estimator(local, idx.astype(np.int64), min(options.samples_for(m0), ESTIMATE_SAMPLES),
+                         options.error_seed + 101)
+    error_targets = options.error_targets()
+    chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
+    direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"
+    budget = options.max_error if options.max_error is not None else math.inf
+    # (indices, simplifier error, sloppy, from level), measured error
+    chosen: list[tuple[_Candidate, SurfaceError | None]] = [((welded, 0.0, False, 0), None)]
+    steps = error_targets if error_targets is not None else options.ratios
+    scale32 = simp._scale_ratio(pos32, welded) if welded.size else 1.0
     for step in steps[1:]:
-        prev = raw[-1][0]
+        (prev, prev_err, _, _), _ = chosen[-1]
         prev_n = prev.shape[0]
+        k_prev = len(chosen) - 1
         max_allowed = math.floor((1.0 - options.min_saving) * prev_n)
-        if options.target_errors is not None:
-            target, target_error = options.min_triangles, max(float(step) - cumulative, 0.0)
-            # meshopt's error is relative to the extent, ours to the diagonal: convert.
-            target_error /= simp._scale_ratio(pos32, prev) if prev.size else 1.0
+        if prev_n <= options.min_triangles or max_allowed < 1:
+            break
+        if error_targets is not None:
+            best = _error_targeted(pos32, welded, chosen, float(step), max_allowed, scale32,
+                                   attrs, weights, options, est, chained, direct)
+            if best is None:
+                break
         else:
-            target, target_error = max(int(round(step * m0)), options.min_triangles), simp.NO_ERROR_LIMIT
-        if target > max_allowed or prev_n <= options.min_triangles:
-            break
-        out, err, sloppy, measured = _simplify_step(pos32, prev, target, target_error, attrs,
-                                                    weights, options, ref)
-        if not 0 < out.shape[0] <= max_allowed:
-            break
-        cumulative += err
-        raw.append((out, cumulative, sloppy))
-        if measured is not None:
-            known[len(raw) - 1] = measured
+            target = max(int(round(step * m0)), options.min_triangles)
+            if target > max_allowed:
+                break
+            cands = []
+            if chained:
+                cands += _candidates(pos32, prev, k_prev, prev_err, target, simp.NO_ERROR_LIMIT,
+                                     attrs, weights, options)
+            if direct and (k_prev > 0 or not chained):
+                cands += _candidates(pos32, welded, 0, 0.0, target, simp.NO_ERROR_LIMIT,
+                                     attrs, weights, options)
+            cands = [c for c in _unique(cands) if 0 < c[0].shape[0] <= max_allowed]
+            if not cands:
+                break
+            errs = _measure(est, cands)
+            slack = options.sloppy_slack * target
+            within = [i for i, c in enumerate(cands) if c[0].shape[0] <= slack]
+            if within:
+                i = min(within, key=lambda i: (_cost(cands[i], errs[i]), cands[i][0].shape[0], i))
+            else:
+                i = min(range(len(cands)), key=lambda i: (cands[i][0].shape[0], i))
+            best = (cands[i], errs[i])
+        e = best[1]
+        if e is not None and not math.isnan(e) and not e <= budget:
+            break  # over the error budget even by the estimate (a lower value): not emitted
+        chosen.append(best)
 
-    # --- measure every level against level 0 with one fixed reference sample set
+    # --- measure every chosen level against level 0 (one prepared reference, one batch)
+    measured: list[SurfaceError | None] = [None] * len(chosen)
+    if est is not None and len(chosen) > 1:
+        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
+        measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]])
+        for k in range(1, len(chosen)):
+            target = error_targets[k] if error_targets is not None else math.inf
+            if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):
+                chosen, measured = chosen[:k], measured[:k]  # over the budget (or target)
+                break
+    chosen = [(c, m) for (c, _), m in zip(chosen, measured)]
+
     ppu = options.pixels_per_unit_at_unit_distance()
     levels = [LodLevel(0, idx, m0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
-    if len(raw) > 1 and not options.measure:
-        nan = math.nan
-        for k, (out, err, sloppy) in enumerate(raw[1:], start=1):
-            levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy))
-    elif len(raw) > 1:
-        todo = [k for k in range(1, len(raw)) if k not in known]
-        known.update(zip(todo, measure_levels(ref, [raw[k][0] for k in todo])))
-        errors = [known[k] for k in range(1, len(raw))]
-        scale = diag if diag > 0 and math.isfinite(diag) else 0.0
-        running = 0.0
-        for k, ((out, err, sloppy), e) in enumerate(zip(raw[1:], errors), start=1):
-            h_model = e.hausdorff_rel * scale
-            running = max(running, h_model)
-            levels.append(LodLevel(
-                level=k, indices=out, triangles=int(out.shape[0]), simplifier_error=err,
-                hausdorff=h_model, rms=e.rms_rel * scale, hausdorff_rel=e.hausdorff_rel,
-                rms_rel=e.rms_rel, switch_distance=running * ppu, sloppy=sloppy))
+    scale = diag if diag > 0 and math.isfinite(diag) else 0.0
+    running = 0.0
+    nan = math.nan
+    for k, ((out, err, sloppy, src), e) in enumerate(chosen[1:], start=1):
+        if e is None:
+            levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy, src))
+            continue
+        h_model = e.hausdorff_rel * scale
+        running = max(running, h_model)
+        levels.append(LodLevel(
+            level=k, indices=out, triangles=int(out.shape[0]), simplifier_error=err,
+            hausdorff=h_model, rms=e.rms_rel * scale, hausdorff_rel=e.hausdorff_rel,
+            rms_rel=e.rms_rel, switch_distance=running * ppu, sloppy=sloppy, from_level=src))
     return LodChain(levels=tuple(levels), diagonal=diag)
+
+
+#: the sampled estimate must be this far within an error target, so that the bound measured
+#: afterwards (at most 1 + the measurement tolerance above the truth) stays within it too
+TARGET_MARGIN = 0.85
+
+
+def _error_targeted(pos32, welded, chosen, target_rel: float, max_allowed: int, scale32: float,
+                    attrs, weights, options: LodOptions, est: _Estimator | None,
+                    chained: bool, direct: bool):
+    """The level with the fewest triangles whose estimated Hausdorff distance is within
+    ``TARGET_MARGIN`` x ``target_rel`` (fraction of the diagonal): meshoptimizer's error
+    limit starts at the target and is halved (up to 6 times) while no candidate is. Without
+    measuring the simplifier's own estimate decides. The level's bound is checked against
+    the target afterwards (the chain ends at a level over it)."""
+    (prev, prev_err, _, _), _ = chosen[-1]
+    k_prev = len(chosen) - 1
+    # meshopt's error is relative to the extent (largest side), ours to the diagonal
+    limit = target_rel / scale32
+    for _ in range(7):
+        cands = []
+        if chained:
+            cands += _candidates(pos32, prev, k_prev, prev_err, options.min_triangles, limit,
+                                 attrs, weights, options)
+        if direct and (k_prev > 0 or not chained):
+            cands += _candidates(pos32, welded, 0, 0.0, options.min_triangles, limit,
+                                 attrs, weights, options)
+        cands = [c for c in _unique(cands) if 0 < c[0].shape[0] <= max_allowed]
+        if not cands:
+            return None  # even the loosest limit saves too little
+        errs = est(cands) if est is not None else [None] * len(cands)
+        ok = [i for i, c in enumerate(cands) if _cost(c, errs[i]) <= TARGET_MARGIN * target_rel]
+        if ok:
+            i = min(ok, key=lambda i: (cands[i][0].shape[0], _cost(cands[i], errs[i]), i))
+            return cands[i], errs[i]
+        limit *= 0.5
+    return None
 
 
 @dataclass(frozen=True, eq=False)

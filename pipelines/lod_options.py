@@ -6,6 +6,9 @@ import math
 from dataclasses import dataclass
 
 SIMPLIFIERS = ("meshopt", "meshopt-attr", "fast-simplification")
+#: how each level is made: from the level above ("chained"), from level 0 ("direct"), or both,
+#: keeping the one with the lower measured Hausdorff distance ("best")
+CHAIN_MODES = ("best", "chained", "direct")
 
 
 @dataclass(frozen=True)
@@ -14,9 +17,11 @@ class LodOptions:
 
     ratios: triangle count of each level as a fraction of level 0's; ``ratios[0]`` must be 1
       (level 0 is the input). Ignored when ``target_errors`` is given.
-    target_errors: instead of ratios, the simplifier error (fraction of the bounding-box
-      diagonal, meshoptimizer's estimate) each level may reach: ``target_errors[0]`` must be
-      0; each further level is simplified as far as that error allows (meshopt only).
+    target_errors: instead of ratios, the *measured* Hausdorff distance (fraction of the
+      bounding-box diagonal) each level may reach: ``target_errors[0]`` must be 0; each
+      further level is simplified as far as meshoptimizer's error limit allows, and the limit
+      is halved (up to 6 times) until the measured distance is within the target (meshopt
+      only; with ``measure`` off the simplifier's own estimate is used).
     min_triangles: no level is simplified below this many triangles.
     min_saving: a level must have at most ``(1 - min_saving)`` of the previous level's
       triangles, or the chain stops there.
@@ -34,7 +39,9 @@ class LodOptions:
       slack was 1.5; at 1.1 the merged spider reaches 1/16 (79 triangles for 85, Hausdorff
       13.1% of the diagonal, by pruning) instead of stopping at 105 triangles at 25.0%.
     uv_weight, normal_weight: attribute weights for "meshopt-attr" (positions are in units
-      of the bounding-box extent; UVs in texture units; normals unit vectors). Small on
+      of the bounding-box extent; UVs are divided by the larger side of their own bounding
+      box first, so tiled UVs (x100, x1e4) weigh as much as UVs in [0, 1]: in texture units
+      they cost 5x the geometric error at the same ratio; normals unit vectors). Small on
       purpose: larger normal weights cost geometric error (spider at 1/8: 8.3% of the
       diagonal with 0.5 against 3.9% with 0.1).
     weld_normal_seams: before simplifying, also weld vertices that differ *only* in their
@@ -52,6 +59,27 @@ class LodOptions:
       with 50,000 samples each (a CAD model of 115 small meshes took 125 s that way).
     measure: False skips the measurement (errors and switch distances are NaN then): for
       timing and previews only, never for output.
+    target_screen_sizes: instead of ratios, the on-screen size (pixels spanned by the
+      bounding-box diagonal) each level is made for: ``target_screen_sizes[0]`` is ignored
+      (level 0); level k may have a measured Hausdorff distance of one pixel at that size,
+      i.e. ``1 / size`` of the diagonal (the same as ``target_errors`` of ``1 / size``).
+      Sizes must decrease.
+    max_error: the error budget, a fraction of the bounding-box diagonal: a level whose
+      measured Hausdorff distance exceeds it is not emitted and the chain ends there (None: no
+      budget). 0.1 means a level may only switch in once the whole mesh spans at most
+      10 px (its error then projects to <= 1 px); fixed ratios used to accept levels whose
+      error was 0.39-0.89 of the diagonal (a part removed).
+    chain: "best" (default): each level is simplified both from the level above and from
+      level 0, and the lower measured Hausdorff distance wins (a level simplified from level
+      0 is not nested in the level above, but it still indexes level 0's vertices, so the
+      vertex prefix layout holds); "chained" or "direct" force one of them.
+    merge_meshes: before simplifying, merge a model's meshes that share a material and a
+      vertex format into one mesh (one triangle budget across its parts, as gltfpack does:
+      small parts are not simplified at the same ratio as large ones). The merged mesh is
+      written as one mesh (docs/FORMAT.md).
+    dedupe_triangles: before simplifying, drop triangles whose three corners coincide with an
+      earlier triangle's (same winding); where the material is double-sided also those with
+      the reverse winding (the back face renders anyway). Level 0 is written without them.
     """
 
     ratios: tuple[float, ...] = (1.0, 1 / 2, 1 / 4, 1 / 8, 1 / 16)
@@ -72,6 +100,11 @@ class LodOptions:
     error_samples_min: int = 2048
     error_samples_per_triangle: float = 4.0
     measure: bool = True
+    target_screen_sizes: tuple[float, ...] | None = None
+    max_error: float | None = 0.1
+    chain: str = "best"
+    merge_meshes: bool = True
+    dedupe_triangles: bool = True
 
     def __post_init__(self) -> None:
         from assetpipe.core.errors import ConfigError
@@ -89,6 +122,21 @@ class LodOptions:
             raise ConfigError("min_saving must be in [0, 1) and min_triangles >= 1")
         if not 0 < self.fov_y_deg < 180 or self.resolution_px < 1:
             raise ConfigError("fov_y_deg must be in (0, 180) and resolution_px >= 1")
+        if self.chain not in CHAIN_MODES:
+            raise ConfigError(f"unknown LOD chain mode {self.chain!r} (one of {CHAIN_MODES})")
+        if self.max_error is not None and not self.max_error > 0:
+            raise ConfigError("the LOD error budget (max_error) must be > 0")
+        sizes = self.target_screen_sizes
+        if sizes is not None and (len(sizes) < 1 or any(not s > 0 for s in sizes[1:])
+                                  or any(b >= a for a, b in zip(sizes[1:], sizes[2:]))):
+            raise ConfigError("LOD target screen sizes must be > 0 and decrease")
+
+    def error_targets(self) -> tuple[float, ...] | None:
+        """The target errors (fractions of the diagonal, first 0) when the chain is asked for
+        by errors or screen sizes; None for ratios."""
+        if self.target_screen_sizes is not None:
+            return (0.0, *(1.0 / s for s in self.target_screen_sizes[1:]))
+        return self.target_errors
 
     def samples_for(self, triangles: int) -> int:
         """Area samples per side for measuring a mesh of ``triangles`` triangles."""

@@ -1,0 +1,110 @@
+"""Cold build of the shared corpus against gltfpack, side by side in one run.
+
+Run:  .venv/bin/python benchmarks/cold_build.py [--rounds 2] [--jobs 2] [--quick]
+
+Ours: ``python -m assetpipe.cli build CORPUS -o OUT --cache CACHE -j JOBS`` into fresh folders
+(cold: nothing cached), with the default options (LOD chains with error measurement on,
+textures, everything the build does). gltfpack: ``gltfpack -i FILE -o OUT.glb -si 0.5`` for
+every model file the build finds (assetpipe.inputs.discover_inputs), run JOBS at a time (one
+process per file). The two alternate for ``--rounds`` rounds so that machine load hits both
+alike; the ratio of the totals and each round's ratio are printed. gltfpack does less (one level, no textures
+processed, no measurement), which is why the goal is a ratio, not parity: <= 2x (stretch 1x).
+``--quick``: one round.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+_SHARED = REPO.parent / "shared" / "corpus"
+CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", _SHARED if _SHARED.is_dir() else "/work/shared/corpus")) / "models"
+
+
+def find_gltfpack() -> str | None:
+    """gltfpack on PATH, else the one npm installed beside a venv (this checkout's or main's)."""
+    found = shutil.which("gltfpack")
+    for venv in (REPO / ".venv", Path("/work/main/.venv")):
+        exe = venv / "node" / "node_modules" / ".bin" / "gltfpack"
+        if found is None and exe.exists():
+            found = str(exe)
+    return found
+
+
+def run_ours(corpus: Path, jobs: int, tmp: Path) -> float:
+    out, cache = tmp / "out", tmp / "cache"
+    shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(cache, ignore_errors=True)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "assetpipe.cli", "build", str(corpus), "-o", str(out),
+                        "--cache", str(cache), "-j", str(jobs), "-q"], env=env, capture_output=True, text=True)
+    dt = time.perf_counter() - t
+    if r.returncode not in (0, 1):  # 1: some asset failed (the corpus has none), still timed
+        raise SystemExit(f"assetpipe build failed ({r.returncode}): {r.stderr[-2000:]}")
+    return dt
+
+
+def run_gltfpack(exe: str, files: list[Path], jobs: int, tmp: Path) -> tuple[float, int]:
+    out = tmp / "gp"
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+
+    def one(i_f):
+        i, f = i_f
+        r = subprocess.run([exe, "-i", str(f), "-o", str(out / f"{i}.glb"), "-si", "0.5"],
+                           capture_output=True, text=True)
+        return r.returncode == 0
+
+    t = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=jobs) as ex:
+        ok = sum(ex.map(one, enumerate(files)))
+    return time.perf_counter() - t, ok
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--quick", action="store_true", help="one round")
+    ap.add_argument("--corpus", type=Path, default=CORPUS)
+    args = ap.parse_args()
+    from assetpipe.inputs import discover_inputs
+
+    exe = find_gltfpack()
+    if exe is None:
+        print("gltfpack not found: nothing to compare with")
+        return 1
+    files = discover_inputs([args.corpus])
+    tmp = Path(tempfile.mkdtemp(prefix="coldbuild-"))
+    ours, theirs = [], []
+    try:
+        for k in range(1 if args.quick else args.rounds):
+            a = run_ours(args.corpus, args.jobs, tmp)
+            b, ok = run_gltfpack(exe, files, args.jobs, tmp)
+            ours.append(a)
+            theirs.append(b)
+            print(f"round {k + 1}: assetpipe build -j {args.jobs}: {a:.2f} s; gltfpack -si 0.5, "
+                  f"{args.jobs} at a time: {b:.2f} s ({ok}/{len(files)} files ok); ratio {a / b:.2f}x",
+                  flush=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    ratios = sorted(a / b for a, b in zip(ours, theirs))
+    print(f"cold build of {len(files)} files over {len(ours)} round(s): ours {sum(ours):.2f} s, "
+          f"gltfpack {sum(theirs):.2f} s in total: {sum(ours) / sum(theirs):.2f}x; per-round ratios "
+          f"{', '.join(f'{r:.2f}' for r in ratios)} (goal <= 2x, stretch <= 1x)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

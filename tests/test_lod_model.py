@@ -1,0 +1,240 @@
+"""Model-level LODs: merged meshes, duplicates dropped, affine copies once, UV-scale
+invariance, the error budget, output identical across runs and -j."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from assetpipe.pipelines.lod import LodOptions, build_lod_chain
+from assetpipe.pipelines.lod_model import LodPart, build_model_lods, dedupe_triangles, find_affine_copies
+from assetpipe.pipelines.surface_error import measure_error, prepare_reference, measure_against
+
+FAST = LodOptions(error_samples=4000)
+
+
+def _bumpy_sphere(sub: int = 4, seed: int = 0, centre=(0.0, 0.0, 0.0), radius: float = 1.0):
+    m = trimesh.creation.icosphere(subdivisions=sub)
+    v = np.asarray(m.vertices, np.float64)
+    rng = np.random.default_rng(seed)
+    k = rng.normal(size=(6, 3)) * 4
+    v = v * (1 + 0.05 * np.sin(v @ k.T).sum(axis=1))[:, None]
+    return v * radius + np.asarray(centre), np.asarray(m.faces, np.uint32)
+
+
+def _grid(n: int = 60, seed: int = 1):
+    """A bumpy height field on [0,1]^2, UVs = (x, y): (positions, faces, uv)."""
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    rng = np.random.default_rng(seed)
+    z = sum(rng.random() * 0.05 * np.sin(rng.integers(1, 6) * 2 * np.pi * x + rng.random() * 6)
+            * np.sin(rng.integers(1, 6) * 2 * np.pi * y) for _ in range(6))
+    pos = np.stack([x, y, z], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    uv = np.stack([x, y], -1).reshape(-1, 2).astype(np.float32)
+    return pos, f.astype(np.uint32), uv
+
+
+def _part(pos, idx, key=0, uv=None, double_sided=False):
+    verts = pos.astype(np.float32) if uv is None else np.hstack([pos, uv]).astype(np.float32)
+    return LodPart(vertices=verts, positions=np.asarray(pos, np.float64), indices=idx, uv=uv,
+                   group_key=key, double_sided=double_sided,
+                   exact=() if uv is None else (uv,))
+
+
+# ----------------------------------------------------------------------------- duplicates
+
+
+def test_dedupe_triangles_exact_reversed_and_split_vertices():
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]], np.float64)  # 4 = copy of 1
+    tri = np.array([[0, 1, 2],   # kept
+                    [1, 2, 0],   # same triangle rotated: exact duplicate
+                    [0, 4, 2],   # same corners through a split vertex: exact duplicate
+                    [0, 2, 1],   # reversed
+                    [1, 3, 2],   # another triangle
+                    [0, 0, 1],   # degenerate: left alone
+                    [0, 0, 1]], np.uint32)
+    single = dedupe_triangles(tri, pos, double_sided=False)
+    assert single.tolist() == [[0, 1, 2], [0, 2, 1], [1, 3, 2], [0, 0, 1], [0, 0, 1]]
+    double = dedupe_triangles(tri, pos, double_sided=True)
+    assert double.tolist() == [[0, 1, 2], [1, 3, 2], [0, 0, 1], [0, 0, 1]]
+
+
+def test_duplicates_do_not_reach_level_0():
+    v, f = _bumpy_sphere(3)
+    doubled = np.concatenate([f, f[:100][:, [1, 2, 0]], f[:50][:, ::-1]])
+    out = build_model_lods([_part(v, doubled, double_sided=True)], FAST)
+    assert out[0].duplicates == 150 and out[0].levels[0].triangles == len(f)
+    out = build_model_lods([_part(v, doubled, double_sided=False)], FAST)
+    assert out[0].duplicates == 100 and out[0].levels[0].triangles == len(f) + 50
+
+
+# ----------------------------------------------------------------------------- UV scale
+
+
+def test_uv_scale_does_not_change_levels():
+    """Tiled UVs (x100, x1e4) used to weigh 100x / 1e4x more and cost 5x the geometric error.
+    UVs are now divided by their own extent, so the levels are the same. The UVs are float32:
+    x1e4 rounds them at ~1e-7 of their extent, which can reorder near-tied collapses, hence
+    a tolerance of 2% on triangle counts and 10% on the error instead of identity."""
+    pos, f, uv = _grid()
+    chains = [build_lod_chain(pos, f, uv=(uv * s).astype(np.float32), options=FAST)
+              for s in (1.0, 100.0, 1e4)]
+    base = chains[0]
+    assert len(base.levels) == 5
+    for other in chains[1:]:
+        assert len(other.levels) == len(base.levels)
+        for a, b in zip(base.levels[1:], other.levels[1:]):
+            assert b.triangles == pytest.approx(a.triangles, rel=0.02)
+            assert b.hausdorff_rel <= 1.1 * a.hausdorff_rel + 1e-9
+
+
+# ----------------------------------------------------------------------------- budget, targets
+
+
+def test_error_budget_drops_levels_over_it():
+    v, f = _bumpy_sphere(4)
+    free = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=None))
+    assert len(free.levels) == 5
+    budget = 0.5 * (free.levels[2].hausdorff_rel + free.levels[3].hausdorff_rel)
+    capped = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=budget))
+    assert 2 <= len(capped.levels) < len(free.levels)
+    assert all(lv.hausdorff_rel <= budget for lv in capped.levels)
+
+
+def test_target_screen_sizes():
+    v, f = _bumpy_sphere(4)
+    sizes = (0.0, 400.0, 100.0)
+    chain = build_lod_chain(v, f, options=LodOptions(error_samples=4000, target_screen_sizes=sizes))
+    assert len(chain.levels) == 3
+    for lv, s in zip(chain.levels[1:], sizes[1:]):
+        assert lv.hausdorff_rel <= 1.0 / s  # one pixel at that size
+    assert chain.levels[2].triangles < chain.levels[1].triangles
+
+
+# ----------------------------------------------------------------------------- merging
+
+
+def _many_parts():
+    """A large sphere (5120 triangles) and 24 small, finely tessellated ones (1280 each),
+    each its own mesh with one material: per mesh, the large one gets only 1/8 too."""
+    parts = [_bumpy_sphere(4, seed=0)]
+    rng = np.random.default_rng(3)
+    for k in range(24):
+        c = rng.normal(size=3)
+        c = 1.6 * c / np.linalg.norm(c)
+        parts.append(_bumpy_sphere(3, seed=k + 1, centre=c, radius=0.06))
+    return parts
+
+
+def test_merged_meshes_beat_per_mesh_at_equal_count():
+    parts = _many_parts()
+    lp = [_part(v, f) for v, f in parts]
+    pos = np.concatenate([v for v, _ in parts])
+    offs = np.cumsum([0] + [len(v) for v, _ in parts])
+    whole = np.concatenate([f.astype(np.int64) + o for (_, f), o in zip(parts, offs)])
+    ref = prepare_reference(pos, whole, samples=20000)
+    results = {}
+    for merge in (True, False):
+        opts = LodOptions(ratios=(1.0, 1 / 8), min_triangles=1, max_error=None, error_samples=4000,
+                          merge_meshes=merge)
+        out = build_model_lods(lp, opts)
+        assert len(out) == (1 if merge else len(parts))
+        vp = np.concatenate([m.vertices[:, :3] for m in out]).astype(np.float64)
+        o2 = np.cumsum([0] + [len(m.vertices) for m in out])
+        lvl = np.concatenate([m.levels[-1].indices.astype(np.int64) + o for m, o in zip(out, o2)])
+        results[merge] = (len(lvl), measure_against(ref, [(vp, lvl)])[0].hausdorff_rel)
+    (n_m, e_m), (n_p, e_p) = results[True], results[False]
+    assert n_m <= 1.02 * n_p  # equal counts (both aim at 1/8 of the whole)
+    assert e_m < 0.8 * e_p, results
+
+
+def test_parts_with_different_materials_are_not_merged():
+    v, f = _bumpy_sphere(2)
+    out = build_model_lods([_part(v, f, key=0), _part(v + 3, f, key=1), _part(v + 6, f, key=0)], FAST)
+    assert [m.parts for m in out] == [(0, 2), (1,)]
+
+
+# ----------------------------------------------------------------------------- copies
+
+
+def test_affine_copies_are_simplified_once_and_errors_scaled():
+    v, f = _bumpy_sphere(4)
+    rot = trimesh.transformations.rotation_matrix(0.7, [1, 2, 3])[:3, :3]
+    lin = rot @ np.diag([2.0, 2.0, 2.0])
+    mirror = np.diag([-1.0, 1.0, 1.0]) * 0.5
+    parts = [_part(v, f, key=0), _part(v @ lin.T + [10, 0, 0], f, key=1),
+             _part(v @ mirror.T, np.ascontiguousarray(f[:, [0, 2, 1]]), key=2)]
+    out = build_model_lods(parts, FAST)
+    assert [m.copy_of for m in out] == [None, 0, 0]
+    for m, s in zip(out[1:], (2.0, 0.5)):
+        assert len(m.levels) == len(out[0].levels)
+        for a, b in zip(out[0].levels[1:], m.levels[1:]):
+            assert b.triangles == a.triangles
+            # the fit residual is float32 rounding (~1e-7 of the size): the scaled error
+            # matches to that
+            assert b.hausdorff == pytest.approx(s * a.hausdorff, rel=1e-4, abs=1e-5)
+    # the copy's levels really are its simplification: a direct measurement agrees
+    m = out[1]
+    e = measure_error(m.vertices[:, :3].astype(np.float64), m.levels[0].indices,
+                      m.vertices[:, :3].astype(np.float64), m.levels[2].indices, samples=4000)
+    assert e.hausdorff == pytest.approx(m.levels[2].hausdorff, rel=0.25)
+
+
+def test_find_affine_copies_rejects_non_affine():
+    v, f = _bumpy_sphere(2)
+    bent = v.copy()
+    bent[:, 0] += 0.3 * v[:, 1] ** 2
+    assert find_affine_copies([(v, f, b""), (bent, f, b""), (v * 3, f, b"uv")]) == [None, None, None]
+
+
+# ----------------------------------------------------------------------------- determinism
+
+
+@pytest.mark.corpus
+def test_build_output_identical_across_runs_and_jobs(corpus, tmp_path):
+    """Two cold builds with -j 1 and -j 2 of corpus models with many parts, copies and
+    merged meshes give byte-identical output files."""
+    import subprocess
+    import sys
+
+    models = [corpus / "models" / n for n in ("spider", "CesiumMilkTruck", "TextureSettingsTest")]
+    outs = []
+    for j in (1, 2):
+        out, cache = tmp_path / f"o{j}", tmp_path / f"c{j}"
+        r = subprocess.run([sys.executable, "-m", "assetpipe.cli", "build", *map(str, models), "-o", str(out),
+                            "--cache", str(cache), "-j", str(j), "-q"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        outs.append({p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*")
+                     if p.is_file() and ".assetpipe" not in p.parts})
+    assert outs[0].keys() == outs[1].keys() and outs[0] == outs[1]
+    assert any(k.endswith(".asset.json") for k in outs[0])
+
+
+def test_new_options_validated():
+    from assetpipe.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="chain mode"):
+        LodOptions(chain="sideways")
+    with pytest.raises(ConfigError, match="budget"):
+        LodOptions(max_error=0.0)
+    with pytest.raises(ConfigError, match="screen sizes"):
+        LodOptions(target_screen_sizes=(0.0, 10.0, 100.0))
+    assert LodOptions(target_screen_sizes=(0.0, 400.0, 100.0)).error_targets() == (0.0, 1 / 400, 1 / 100)
+
+
+def test_best_keeps_the_lower_measured_level():
+    """chain="best" measures a level made from the level above and one made from level 0 and
+    keeps the lower; each level says which (from_level)."""
+    v, f = _bumpy_sphere(4)
+    best = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=None))
+    assert {lv.from_level for lv in best.levels[2:]} <= {0} | {lv.level - 1 for lv in best.levels[2:]}
+    assert all(lv.from_level == 0 for lv in best.levels[:2])
+    direct = build_lod_chain(v, f, options=LodOptions(error_samples=4000, max_error=None, chain="direct"))
+    # level 2 sees the same two candidates whenever level 1 matches: best <= direct there
+    if best.levels[1].indices.tobytes() == direct.levels[1].indices.tobytes():
+        assert best.levels[2].hausdorff_rel <= direct.levels[2].hausdorff_rel + 1e-12
