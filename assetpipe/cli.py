@@ -98,7 +98,6 @@ def eval_ratio(text: str) -> float:
               help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
                    "double), checked from its header before decoding.")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
           max_image_pixels) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
