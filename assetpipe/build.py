@@ -46,6 +46,7 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     out_dir.mkdir(parents=True, exist_ok=True)
     sweep_tmp(out_dir)
     store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
+    session = store.begin_build(out_dir)  # for the cache collector and `assetpipe cache stats`
     stat = StatCache(store.root / "stat-cache.json")
     state = OutputState(out_dir)
     results: list[AssetResult] = []
@@ -93,6 +94,7 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     if todo or forgotten or removed or state.touched or scene_run is not None:
         state.save(explain_steps)
     stat.save()
+    store.end_build(session, out_dir, time.perf_counter() - t0)
     return BuildReport(results=results, seconds=time.perf_counter() - t0, removed=removed,
                        cache_dropped=list(store.dropped))
 

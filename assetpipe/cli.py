@@ -119,5 +119,14 @@ def _register_renderer_commands() -> None:
 
 _register_renderer_commands()
 
+
+def _register_cache_commands() -> None:
+    from assetpipe.cache_cli import cache
+
+    main.add_command(cache)
+
+
+_register_cache_commands()
+
 if __name__ == "__main__":  # pragma: no cover
     main()

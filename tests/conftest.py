@@ -2,8 +2,8 @@
 
 The corpus location comes from one setting, ``$ASSETPIPE_CORPUS`` (a folder holding ``models/``
 and ``nasty/``), by default ``../shared/corpus`` beside the repository. Where it is absent, every
-test that asks for the ``corpus`` fixture is skipped with one reason (folded into one line of the
-summary, and named once in the header); the rest of the suite runs on fixtures in ``tests/data``,
+test that asks for the ``corpus`` fixture is set aside (deselected) and one line at the end of
+the run says how many and how to get the corpus; the rest of the suite runs on fixtures in ``tests/data``,
 ``examples/`` and meshes the tests generate.
 """
 
@@ -21,18 +21,35 @@ CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS") or REPO.parent / "shared" / "co
 MODELS = CORPUS / "models"
 NASTY = CORPUS / "nasty"
 CORPUS_PRESENT = MODELS.is_dir() and NASTY.is_dir()
-CORPUS_MISSING = (f"corpus tests skipped: no corpus at {CORPUS} (set ASSETPIPE_CORPUS to a folder with "
+CORPUS_MISSING = (f"corpus tests skipped (deselected): no corpus at {CORPUS} (set ASSETPIPE_CORPUS to a folder with "
                   "models/ and nasty/; its MANIFEST.tsv names each file's public source: README.md, 'The test corpus')")
 
 
 def pytest_report_header(config):
-    return f"corpus: {CORPUS}" if CORPUS_PRESENT else CORPUS_MISSING
+    return f"corpus: {CORPUS}" if CORPUS_PRESENT else None
+
+
+def pytest_collection_modifyitems(config, items):
+    """Without the corpus, the tests that need it are set aside (one line says so, once)."""
+    if CORPUS_PRESENT:
+        return
+    need = [it for it in items if "corpus" in getattr(it, "fixturenames", ())]
+    if need:
+        config.hook.pytest_deselected(items=need)
+        items[:] = [it for it in items if "corpus" not in getattr(it, "fixturenames", ())]
+        config._assetpipe_corpus_skipped = len(need)
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    n = getattr(config, "_assetpipe_corpus_skipped", 0)
+    if n:
+        terminalreporter.write_line(f"{n} {CORPUS_MISSING}")
 
 
 @pytest.fixture(scope="session")
 def corpus() -> Path:
-    if not CORPUS_PRESENT:
-        pytest.skip(CORPUS_MISSING)  # raised here, so every skip folds into one summary line
+    if not CORPUS_PRESENT:  # only reached by a test asking for it lazily (request.getfixturevalue)
+        pytest.skip(CORPUS_MISSING)
     return CORPUS
 
 
