@@ -59,8 +59,9 @@ def eval_ratio(text: str) -> float:
               show_default=True, help="Output folder.")
 @click.option("--json", "json_report", type=click.Path(path_type=Path), default=None,
               help="Write a JSON report (one entry per input) to this file.")
-@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=1, show_default=True,
-              help="Worker processes for the build steps (outputs are identical for any value).")
+@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=None,
+              help="Worker processes for the build steps (outputs are identical for any value) "
+                   "[default: the usable CPU count].")
 @click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None,
               help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe].")
 @click.option("--explain", is_flag=True, help="Say, for every step that ran, why it ran.")
@@ -76,9 +77,15 @@ def eval_ratio(text: str) -> float:
               help="Downsize textures so neither side exceeds this (power of two steps).")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, max_texture_size) -> None:
-    """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
+    """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
+    files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
+    what its objects can use, and OUT/<scene>.scene.json lists the instances."""
+    from assetpipe.api import usable_cpus
     from assetpipe.build import run_build
     from assetpipe.progress import Reporter
+
+    if jobs is None:
+        jobs = usable_cpus()  # as ninja: the CPUs this process may run on
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
     reporter = Reporter(quiet=quiet, explain=explain)
