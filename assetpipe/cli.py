@@ -47,6 +47,21 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
     return BuildOptions(mesh=mesh, lod=lod, texture=texture)
 
 
+def _project_defaults(inputs, **given):
+    """The build's option values after the project file, and where each came from."""
+    from click.core import ParameterSource
+
+    from assetpipe.project_config import project_config_for, resolve
+
+    ctx = click.get_current_context()
+    flags = {n for n in given if ctx.get_parameter_source(n) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)}
+    try:
+        merged, origin = resolve(given, flags, project_config_for(list(inputs)))
+    except AssetpipeError as exc:
+        raise click.ClickException(str(exc)) from None
+    return tuple(merged[n] for n in given), origin
+
+
 def eval_ratio(text: str) -> float:
     """'0.25' or '1/4' -> 0.25 (no eval)."""
     num, _, den = text.strip().partition("/")
@@ -84,8 +99,22 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout,
     from assetpipe.build import run_build
     from assetpipe.progress import Reporter
 
+    # team defaults: a project file (assetpipe.toml / [tool.assetpipe]) under the command-line flags
+    (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size), origin = \
+        _project_defaults(inputs, jobs=jobs, cache_dir=cache_dir, layout=layout, lod_ratios=lod_ratios,
+                          no_lod=no_lod, simplifier=simplifier, lock_border=lock_border,
+                          max_texture_size=max_texture_size)
     if jobs is None:
         jobs = usable_cpus()  # as ninja: the CPUs this process may run on
+    if explain:
+        from assetpipe.cache.store import default_cache_dir
+
+        shown = {"jobs": jobs, "cache_dir": cache_dir or default_cache_dir(), "layout": layout,
+                 "lod_ratios": lod_ratios or ",".join(f"{r:g}" for r in _D.lod.ratios), "no_lod": no_lod,
+                 "simplifier": simplifier or _D.lod.simplifier, "lock_border": lock_border,
+                 "max_texture_size": max_texture_size or "none"}
+        for name, where in origin.items():
+            click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
     reporter = Reporter(quiet=quiet, explain=explain)
