@@ -156,6 +156,58 @@ def _register_renderer_commands() -> None:
 _register_renderer_commands()
 
 
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
+              help="Output folder.")
+@click.option("--preview", is_flag=True, help="Also render OUT/ID-preview.png of every rebuilt model.")
+@click.option("--debounce", type=click.IntRange(10, 60000), default=300, show_default=True,
+              help="Milliseconds without a change before a burst of writes is rebuilt.")
+@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=None, help="Worker processes [default: the usable CPU count].")
+@click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None, help="Cache folder (as for build).")
+@click.option("--layout", default=",".join(_D.mesh.layout), show_default=True, help="As for build.")
+@click.option("--lod-ratios", default=None, help="As for build.")
+@click.option("--no-lod", is_flag=True, help="As for build.")
+@click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None, help="As for build.")
+@click.option("--lock-border", is_flag=True, help="As for build.")
+@click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None, help="As for build.")
+def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border,
+          max_texture_size) -> None:
+    """Build INPUTS into OUT, then rebuild what changed whenever a source is saved (Ctrl-C stops)."""
+    from assetpipe.api import usable_cpus
+    from assetpipe.watch import watch as watch_loop
+
+    (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size), _ = \
+        _project_defaults(inputs, jobs=jobs, cache_dir=cache_dir, layout=layout, lod_ratios=lod_ratios,
+                          no_lod=no_lod, simplifier=simplifier, lock_border=lock_border,
+                          max_texture_size=max_texture_size)
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+
+    def show(event) -> None:
+        import time as _time
+
+        stamp = _time.strftime("%H:%M:%S")
+        what = f"{len(event.changed)} change(s)" if event.changed else "first build"
+        counts = event.report.counts()
+        text = ", ".join(f"{counts[k]} {k}" for k in ("built", "cached", "failed") if counts.get(k)) or "nothing"
+        click.echo(f"[{stamp}] {what}: {text} ({event.report.seconds:.2f}s)", err=False)
+        for r in event.report.failed:
+            click.echo(f"  FAILED {r.error} (the last good outputs stay)", err=True)
+        for p in event.previews:
+            click.echo(f"  preview: {p}")
+
+    def ready(folders) -> None:
+        click.echo(f"watching {', '.join(str(p) for p in folders)} -> {out_dir} (Ctrl-C stops)")
+
+    try:
+        watch_loop(list(inputs), out_dir, options, jobs=jobs or usable_cpus(), cache_dir=cache_dir, preview=preview,
+                   debounce_ms=debounce, on_build=show, on_ready=ready)
+    except KeyboardInterrupt:
+        pass
+    except AssetpipeError as exc:
+        raise click.ClickException(str(exc)) from None
+
+
 def _register_cache_commands() -> None:
     from assetpipe.cache_cli import cache
 
