@@ -191,6 +191,8 @@ def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratio
         counts = event.report.counts()
         text = ", ".join(f"{counts[k]} {k}" for k in ("built", "cached", "failed") if counts.get(k)) or "nothing"
         click.echo(f"[{stamp}] {what}: {text} ({event.report.seconds:.2f}s)", err=False)
+        if event.error:
+            click.echo(f"  ERROR {event.error} (watching goes on)", err=True)
         for r in event.report.failed:
             click.echo(f"  FAILED {r.error} (the last good outputs stay)", err=True)
         for p in event.previews:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from assetpipe.build_types import BuildReport
+from assetpipe.core.errors import AssetpipeError
 
 DEFAULT_DEBOUNCE_MS = 300
 
@@ -33,6 +34,7 @@ class WatchEvent:
     changed: list[str]
     report: BuildReport
     previews: list[str]
+    error: str | None = None  # the build could not run at all (the cache or output folder unusable)
 
 
 def _watched_folders(inputs: list[Path], report: BuildReport | None) -> set[Path]:
@@ -79,7 +81,13 @@ def watch(inputs: list[Path], out_dir: Path, options, *, jobs: int = 1, cache_di
         return watchfiles.DefaultFilter()(change, path)
 
     def rebuild(changed: list[str]) -> BuildReport:
-        report = run_build(inputs, out_dir, options, jobs=jobs, cache_dir=cache_dir)
+        try:
+            report = run_build(inputs, out_dir, options, jobs=jobs, cache_dir=cache_dir)
+        except (AssetpipeError, OSError) as exc:  # the build as a whole (cache, output folder): say so, go on
+            report = BuildReport(results=[], seconds=0.0)
+            if on_build:
+                on_build(WatchEvent(changed=changed, report=report, previews=[], error=str(exc)))
+            return report
         previews = []
         if preview:
             for r in report.results:
@@ -100,8 +108,11 @@ def watch(inputs: list[Path], out_dir: Path, options, *, jobs: int = 1, cache_di
                 return
             if not ready:  # the watcher runs now: catch up with saves made before it started
                 ready = True
-                catch_up = run_build(inputs, out_dir, options, jobs=jobs, cache_dir=cache_dir)
-                if catch_up.counts().keys() - {"cached", "skipped"}:
+                try:
+                    catch_up = run_build(inputs, out_dir, options, jobs=jobs, cache_dir=cache_dir).counts()
+                except (AssetpipeError, OSError):
+                    catch_up = {}  # reported by the build before; the next save tries again
+                if catch_up.keys() - {"cached", "skipped"}:
                     report = rebuild(["(saved before the watch started)"])
                 if on_ready:
                     on_ready(sorted(folders))

@@ -128,3 +128,23 @@ def test_cli_watch_with_preview_until_interrupted(tmp_path):
         except subprocess.TimeoutExpired:
             proc.kill()
     assert proc.returncode == 0
+
+
+def test_an_unusable_output_folder_is_reported_and_watching_goes_on(tmp_path):
+    src = tmp_path / "src"
+    shutil.copytree(REPO / "examples" / "pyramid", src / "pyramid")
+    (tmp_path / "blocker").write_text("a file where the output folder's parent should be")
+    events: queue.Queue = queue.Queue()
+    stop, ready = threading.Event(), threading.Event()
+    t = threading.Thread(target=watch, args=([src], tmp_path / "blocker" / "out", DEFAULT_BUILD_OPTIONS),
+                         kwargs=dict(jobs=1, cache_dir=tmp_path / "cache", debounce_ms=200, on_build=events.put,
+                                     on_ready=lambda folders: ready.set(), stop_event=stop), daemon=True)
+    t.start()
+    try:
+        first = next_event(events)
+        assert first.error and "blocker" in first.error and first.report.results == []
+        assert ready.wait(TIMEOUT) and t.is_alive()
+    finally:
+        stop.set()
+        t.join(TIMEOUT)
+    assert not t.is_alive()
