@@ -54,6 +54,30 @@ def default_cache_dir() -> Path:
     return (Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache") / "assetpipe"
 
 
+class _BuildSession:
+    """A running build's registration: its file in ``builds/``, locked until closed. Closed by
+    :meth:`Store.end_build`, or when the build's frame is dropped (a build that raised), so a
+    long-lived process (watch, the API) never leaves a registration that looks like a running build."""
+
+    def __init__(self, fd: int, path: Path):
+        self.fd, self.path = fd, path
+
+    def __getitem__(self, i: int):  # (fd, path), as a tuple
+        return (self.fd, self.path)[i]
+
+    def close(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None
+
+    __del__ = close
+
+
 def _reflink(src: Path, dst: Path) -> bool:
     """Clone ``src`` to ``dst`` (FICLONE: copy-on-write, no data copied); False where unsupported."""
     global _REFLINK_OK
@@ -258,7 +282,7 @@ class Store:
             fcntl.flock(fd, fcntl.LOCK_EX)
             os.utime(path)  # its mtime: when this build started
         except OSError:
-            return None  # not registered: a collection meanwhile keeps what is younger than an hour
+            return None  # not registered: a collection meanwhile keeps what is younger than 10 minutes
         if out_dir is not None:
             from assetpipe.core.hashing import digest_bytes
 
@@ -270,7 +294,7 @@ class Store:
                     self._write_small(reg, target.encode())
             except OSError:
                 pass
-        return (fd, path)
+        return _BuildSession(fd, path)
 
     def _write_small(self, path: Path, data: bytes) -> None:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
@@ -290,12 +314,7 @@ class Store:
         except OSError:
             pass
         if session is not None:
-            fd, path = session
-            try:
-                os.unlink(path)
-            except OSError:
-                pass
-            os.close(fd)
+            session.close()
         if self.writes:
             from assetpipe.cache.maintenance import auto_collect
 

@@ -234,3 +234,12 @@ def test_export_blob_hardlinks_only_when_asked_and_only_once(tmp_path, monkeypat
     assert store.get_blob(d) is None and len(store.dropped) == 1
     with pytest.raises(FileNotFoundError, match=r"blob xxh3:[0-9a-f]+ for .*t2\.png vanished from the cache"):
         store.export_blob(d, tmp_path / "o2" / "t2.png", tmp_path / "o2")
+
+
+def test_a_build_session_dropped_without_end_build_unregisters(tmp_path):
+    store = Store(tmp_path / "cache")
+    session = store.begin_build()
+    path = session[1]
+    assert path.exists()
+    del session  # a build that raised: its frame, and the session, are dropped
+    assert not path.exists() and list((tmp_path / "cache" / "builds").iterdir()) == []
