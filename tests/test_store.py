@@ -164,7 +164,7 @@ def test_shard_folder_that_cannot_be_created_is_a_cache_error(store, monkeypatch
 
 
 def test_bad_digest_refused(store):
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="not a digest: .xxh3:not-hex!."):
         store.get_blob("xxh3:not-hex!")
 
 
