@@ -56,7 +56,8 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
         sweep_tmp(out_dir)
         store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
         versions.use_cache_dir(store.root)  # nothing is written outside -o and the cache
-        return _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_result, limits)
+        session = store.begin_build(out_dir)  # for the cache collector and `assetpipe cache stats`
+        return _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits)
     finally:
         lock.close()
 
@@ -83,7 +84,7 @@ def _lock_output(out_dir: Path):
     return f
 
 
-def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_result, limits) -> BuildReport:
+def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits) -> BuildReport:
     from assetpipe.cache.stat_cache import StatCache
     from assetpipe.state import OutputState
 
@@ -140,6 +141,7 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, on_resu
 
             raise ConfigError(f"cannot write the build state in {out_dir}: {exc}") from None
     stat.save()
+    store.end_build(session, out_dir, time.perf_counter() - t0)
     return BuildReport(results=results, seconds=time.perf_counter() - t0, removed=removed,
                        cache_dropped=list(store.dropped))
 

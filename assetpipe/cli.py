@@ -55,6 +55,21 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
     return BuildOptions(mesh=mesh, lod=lod, texture=texture)
 
 
+def _project_defaults(inputs, **given):
+    """The build's option values after the project file, and where each came from."""
+    from click.core import ParameterSource
+
+    from assetpipe.project_config import project_config_for, resolve
+
+    ctx = click.get_current_context()
+    flags = {n for n in given if ctx.get_parameter_source(n) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)}
+    try:
+        merged, origin = resolve(given, flags, project_config_for(list(inputs)))
+    except AssetpipeError as exc:
+        raise click.ClickException(str(exc)) from None
+    return tuple(merged[n] for n in given), origin
+
+
 def eval_ratio(text: str) -> float:
     """'0.25' or '1/4' -> 0.25 (no eval)."""
     num, _, den = text.strip().partition("/")
@@ -67,8 +82,9 @@ def eval_ratio(text: str) -> float:
               show_default=True, help="Output folder.")
 @click.option("--json", "json_report", type=click.Path(path_type=Path), default=None,
               help="Write a JSON report (one entry per input) to this file.")
-@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=1, show_default=True,
-              help="Worker processes for the build steps (outputs are identical for any value).")
+@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=None,
+              help="Worker processes for the build steps (outputs are identical for any value) "
+                   "[default: the usable CPU count].")
 @click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None,
               help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe].")
 @click.option("--explain", is_flag=True, help="Say, for every step that ran, why it ran.")
@@ -100,12 +116,38 @@ def eval_ratio(text: str) -> float:
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
           max_image_pixels) -> None:
-    """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
+    """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
+    files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
+    what its objects can use, and OUT/<scene>.scene.json lists the instances."""
     import dataclasses
 
+    from assetpipe.api import usable_cpus
     from assetpipe.build import run_build
     from assetpipe.build_types import BuildLimits
     from assetpipe.progress import Reporter
+
+    # team defaults: a project file (assetpipe.toml / [tool.assetpipe]) under the command-line flags
+    given = dict(jobs=jobs, cache_dir=cache_dir, layout=layout, lod_ratios=lod_ratios, no_lod=no_lod,
+                 simplifier=simplifier, lock_border=lock_border, lod_max_error=lod_max_error,
+                 lod_screen_sizes=lod_screen_sizes, max_texture_size=max_texture_size, recenter=recenter,
+                 max_output_mb=max_output_mb, max_image_pixels=max_image_pixels)
+    values, origin = _project_defaults(inputs, **given)
+    (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, lod_max_error, lod_screen_sizes,
+     max_texture_size, recenter, max_output_mb, max_image_pixels) = values
+    if jobs is None:
+        jobs = usable_cpus()  # as ninja: the CPUs this process may run on
+    if explain:
+        from assetpipe.cache.store import default_cache_dir
+
+        shown = {"jobs": jobs, "cache_dir": cache_dir or default_cache_dir(), "layout": layout,
+                 "lod_ratios": lod_ratios or ",".join(f"{r:g}" for r in _D.lod.ratios), "no_lod": no_lod,
+                 "simplifier": simplifier or _D.lod.simplifier, "lock_border": lock_border,
+                 "lod_max_error": _D.lod.max_error if lod_max_error is None else lod_max_error,
+                 "lod_screen_sizes": lod_screen_sizes or "none",
+                 "max_texture_size": max_texture_size or "none", "recenter": recenter,
+                 "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels}
+        for name, where in origin.items():
+            click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
                              lod_max_error, lod_screen_sizes)
@@ -149,6 +191,69 @@ def _register_renderer_commands() -> None:
 
 
 _register_renderer_commands()
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
+              help="Output folder.")
+@click.option("--preview", is_flag=True, help="Also render OUT/ID-preview.png of every rebuilt model.")
+@click.option("--debounce", type=click.IntRange(10, 60000), default=300, show_default=True,
+              help="Milliseconds without a change before a burst of writes is rebuilt.")
+@click.option("-j", "--jobs", type=click.IntRange(1, 256), default=None, help="Worker processes [default: the usable CPU count].")
+@click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None, help="Cache folder (as for build).")
+@click.option("--layout", default=",".join(_D.mesh.layout), show_default=True, help="As for build.")
+@click.option("--lod-ratios", default=None, help="As for build.")
+@click.option("--no-lod", is_flag=True, help="As for build.")
+@click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None, help="As for build.")
+@click.option("--lock-border", is_flag=True, help="As for build.")
+@click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None, help="As for build.")
+def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border,
+          max_texture_size) -> None:
+    """Build INPUTS into OUT, then rebuild what changed whenever a source is saved (Ctrl-C stops)."""
+    from assetpipe.api import usable_cpus
+    from assetpipe.watch import watch as watch_loop
+
+    (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size), _ = \
+        _project_defaults(inputs, jobs=jobs, cache_dir=cache_dir, layout=layout, lod_ratios=lod_ratios,
+                          no_lod=no_lod, simplifier=simplifier, lock_border=lock_border,
+                          max_texture_size=max_texture_size)
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+
+    def show(event) -> None:
+        import time as _time
+
+        stamp = _time.strftime("%H:%M:%S")
+        what = f"{len(event.changed)} change(s)" if event.changed else "first build"
+        counts = event.report.counts()
+        text = ", ".join(f"{counts[k]} {k}" for k in ("built", "cached", "failed") if counts.get(k)) or "nothing"
+        click.echo(f"[{stamp}] {what}: {text} ({event.report.seconds:.2f}s)", err=False)
+        if event.error:
+            click.echo(f"  ERROR {event.error} (watching goes on)", err=True)
+        for r in event.report.failed:
+            click.echo(f"  FAILED {r.error} (the last good outputs stay)", err=True)
+        for p in event.previews:
+            click.echo(f"  preview: {p}")
+
+    def ready(folders) -> None:
+        click.echo(f"watching {', '.join(str(p) for p in folders)} -> {out_dir} (Ctrl-C stops)")
+
+    try:
+        watch_loop(list(inputs), out_dir, options, jobs=jobs or usable_cpus(), cache_dir=cache_dir, preview=preview,
+                   debounce_ms=debounce, on_build=show, on_ready=ready)
+    except KeyboardInterrupt:
+        pass
+    except AssetpipeError as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+def _register_cache_commands() -> None:
+    from assetpipe.cache_cli import cache
+
+    main.add_command(cache)
+
+
+_register_cache_commands()
 
 if __name__ == "__main__":  # pragma: no cover
     main()

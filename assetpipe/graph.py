@@ -205,8 +205,10 @@ class Graph:
             rec = self.store.get_record(key)
             if rec is not None and (accept is None or accept(call, rec)):
                 results[key] = rec
+                self.store.hits += 1
             else:  # absent, or stale: run it and overwrite the record
                 to_run[key] = call
+                self.store.misses += 1
         keys = list(to_run)
         for key, (status, value, secs) in zip(keys, self.executor.map([to_run[k] for k in keys])):
             for a, _, _ in owners[key]:

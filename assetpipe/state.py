@@ -133,10 +133,8 @@ class OutputState:
             except FileNotFoundError:
                 if rel in prev:
                     notes.append(f"output missing, restored: {rel}")
-            data = store.get_blob(digest)
-            if data is None:
-                raise FileNotFoundError(f"blob {digest} for {rel} vanished from the cache")
-            write_atomic(p, data, tmp)
+            p.parent.mkdir(parents=True, exist_ok=True)
+            store.export_blob(digest, p, tmp)  # a hard link to the blob where possible, else a copy
             st = os.stat(p)
             table[rel] = [digest, st.st_size, st.st_mtime_ns]
         return table, notes

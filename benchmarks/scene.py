@@ -1,7 +1,8 @@
 """Scene build against building the whole folder it draws from (project issue 7).
 
 A scene placing a few corpus models (at limited view distances and screen sizes) is built
-into a fresh cache, and so is the whole ``../shared/corpus/models`` folder; both through the
+into a fresh cache, and so is the whole ``$ASSETPIPE_CORPUS/models`` folder (default
+``../shared/corpus/models``); both through the
 real CLI as subprocesses, interleaved, median of N cold runs each. Printed: wall times, their
 ratio, and what the scene build skipped (models, LOD levels, mip levels, attributes).
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -21,7 +23,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-CORPUS = REPO.parent / "shared" / "corpus" / "models"
+CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS") or REPO.parent / "shared" / "corpus") / "models"
 CLI = [sys.executable, "-m", "assetpipe.cli", "build"]
 
 

@@ -5,27 +5,41 @@ Layout under the cache root::
     objects/ab/<30 hex>     a blob; its name is the xxh3-128 of its content
     actions/ab/<30 hex>     a step record (JSON) under the step's cache key
     tmp/                    files being written (renamed into place when complete)
+    builds/<pid>-<n>        one per running build, locked while it runs (the collector keeps
+                            everything used since the oldest running build started)
+    outputs/<digest>        the output folders built with this cache (their blobs are kept)
+    last-build.json         the last build's step lookups and hits (``assetpipe cache stats``)
 
-Every write goes to ``tmp/`` and is renamed into place (atomic on POSIX), so a reader or a
-killed build never sees half a file, and two builds writing the same entry at once both
-succeed with the same content. Every read is verified: a blob whose content no longer
-matches its name, or a record that does not parse or lacks its checksum, is deleted and
-reported as missing, so the caller rebuilds it; a corrupted cache is never served.
+Blobs are read-only (0444). An output is put in place (``export_blob``) as a reflink of its
+blob where the file system can (btrfs, XFS: copy-on-write, so no second copy on disk and an
+edit of the output never reaches the blob), else as a copy. Hard links would also save the
+copy on ext4, but an output sharing its blob's inode can be edited *in place* (``open(p, "w")``,
+``echo >``, an editor that keeps hard links; file modes do not stop root) and that edit would
+change the cached blob: so they are used only when asked for (``ASSETPIPE_OUTPUT_LINKS=hardlink``,
+and then only for a blob no other output folder links yet). Either way the cache never *serves*
+a changed blob: every blob is verified against its digest whenever it is read.
 
 Imports only the standard library and xxhash (the no-op build path uses it).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import shutil
 import tempfile
+import time
 from pathlib import Path
 
 from assetpipe.core.errors import CacheError
 from assetpipe.core.hashing import PREFIX, canonical_json, digest_bytes
 
 ENV_VAR = "ASSETPIPE_CACHE"
+BLOB_MODE = 0o444  # blobs are never written in place: read-only, for every output linked to them
+LAST_BUILD = "last-build.json"
+LINKS_ENV = "ASSETPIPE_OUTPUT_LINKS"  # "hardlink": outputs share their blob's inode (see above)
+_REFLINK_OK = True  # turned off for this process at the first file system that refuses FICLONE
 # folders this process has made sure exist (a Store is made per task: this saves a mkdir a write)
 _KNOWN_DIRS: set[Path] = set()
 
@@ -40,6 +54,66 @@ def default_cache_dir() -> Path:
     return (Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".cache") / "assetpipe"
 
 
+class _BuildSession:
+    """A running build's registration: its file in ``builds/``, locked until closed. Closed by
+    :meth:`Store.end_build`, or when the build's frame is dropped (a build that raised), so a
+    long-lived process (watch, the API) never leaves a registration that looks like a running build."""
+
+    def __init__(self, fd: int, path: Path):
+        self.fd, self.path = fd, path
+
+    def __getitem__(self, i: int):  # (fd, path), as a tuple
+        return (self.fd, self.path)[i]
+
+    def close(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None
+
+    __del__ = close
+
+
+def _reflink(src: Path, dst: Path) -> bool:
+    """Clone ``src`` to ``dst`` (FICLONE: copy-on-write, no data copied); False where unsupported."""
+    global _REFLINK_OK
+    if not _REFLINK_OK:
+        return False
+    try:
+        import fcntl
+
+        with open(src, "rb") as s, open(dst, "wb") as d:
+            fcntl.ioctl(d.fileno(), 0x40049409, s.fileno())  # FICLONE
+        os.chmod(dst, 0o644)
+        return True
+    except (OSError, ImportError) as exc:
+        try:
+            os.unlink(dst)
+        except OSError:
+            pass
+        if getattr(exc, "errno", None) in (errno.EOPNOTSUPP, errno.EXDEV, errno.EINVAL, errno.ENOTTY):
+            _REFLINK_OK = False if getattr(exc, "errno", None) != errno.EXDEV else _REFLINK_OK
+        return False
+
+
+def _hardlink(src: Path, dst: Path) -> bool:
+    """Hard-link ``src`` (a blob no other output folder links yet) to ``dst``; False otherwise."""
+    try:
+        st = os.stat(src)
+        if st.st_nlink != 1:
+            return False
+        if st.st_mode & 0o777 != BLOB_MODE:
+            os.chmod(src, BLOB_MODE)
+        os.link(src, dst)
+        return True
+    except OSError:
+        return False
+
+
 def _split(digest: str) -> tuple[str, str]:
     hexpart = digest[len(PREFIX):] if digest.startswith(PREFIX) else digest
     if len(hexpart) < 8 or any(c not in "0123456789abcdef" for c in hexpart):
@@ -51,6 +125,9 @@ class Store:
     def __init__(self, root: Path):
         self.root = Path(root)
         self.dropped: list[str] = []  # entries found corrupt and deleted during this run
+        self.hits = 0  # step lookups answered from the cache during this run
+        self.misses = 0  # ... and not (the step runs)
+        self.writes = 0  # blobs and records written during this run
         self._dirs = _KNOWN_DIRS
         if self.root in _KNOWN_DIRS:
             return
@@ -75,7 +152,8 @@ class Store:
         except OSError as exc:
             raise CacheError(f"cannot read from the cache folder {self.root}: {exc.strerror}") from None
 
-    def _write(self, path: Path, data: bytes) -> None:
+    def _write(self, path: Path, data: bytes, mode: int | None = None) -> None:
+        self.writes += 1
         for attempt in (0, 1):
             tmp = None
             try:
@@ -86,6 +164,8 @@ class Store:
                 fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
                 with os.fdopen(fd, "wb") as f:
                     f.write(data)
+                if mode is not None:
+                    os.chmod(tmp, mode)
                 os.replace(tmp, path)
                 return
             except OSError as exc:
@@ -111,7 +191,7 @@ class Store:
         digest = digest_bytes(data)
         path = self._path("objects", digest)
         if self.get_blob(digest) is None:  # absent, or present but corrupt (dropped): write it
-            self._write(path, data)
+            self._write(path, data, BLOB_MODE)
         return digest
 
     def get_blob(self, digest: str) -> bytes | None:
@@ -130,6 +210,32 @@ class Store:
 
     def blob_path(self, digest: str) -> Path:
         return self._path("objects", digest)
+
+    def export_blob(self, digest: str, dest: Path, tmp_dir: Path) -> str:
+        """Put blob ``digest`` at ``dest`` atomically (through ``tmp_dir``, on dest's file system),
+        verified; returns how: "reflink", "hardlink" or "copy" (module docstring). Raises
+        FileNotFoundError when the blob is missing or corrupt (then dropped)."""
+        path = self._path("objects", digest)
+        if self.get_blob(digest) is None:
+            raise FileNotFoundError(f"blob {digest} for {dest} vanished from the cache")
+        tmp = Path(tmp_dir) / f".{Path(dest).name}.{os.getpid()}.{time.monotonic_ns()}.tmp"
+        how = "copy"
+        try:
+            if os.environ.get(LINKS_ENV) == "hardlink" and _hardlink(path, tmp):
+                how = "hardlink"
+            elif _reflink(path, tmp):
+                how = "reflink"
+            else:
+                shutil.copyfile(path, tmp)
+                os.chmod(tmp, 0o644)
+            os.replace(tmp, dest)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+        return how
 
     # -- step records -------------------------------------------------------------------
     def put_record(self, key: str, record: dict) -> None:
@@ -155,4 +261,61 @@ class Store:
             if self.get_blob(d) is None:  # absent, or corrupt (then dropped too)
                 self._drop(path, f"blob {d} is missing or corrupt")
                 return None
+        try:  # its last use, for the collector (least recently used goes first)
+            os.utime(path)
+        except OSError:
+            pass
         return record
+
+    # -- build sessions (for the collector and ``cache stats``) ------------------------------
+    def begin_build(self, out_dir: Path | None = None):
+        """Register a running build: a file in ``builds/`` locked until :meth:`end_build` (or the
+        process's end), so a collection meanwhile keeps everything this build may still use;
+        and the output folder, whose current outputs' blobs a collection keeps."""
+        import fcntl
+
+        d = self.root / "builds"
+        try:
+            d.mkdir(exist_ok=True)
+            path = d / f"{os.getpid()}-{time.monotonic_ns()}"
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            os.utime(path)  # its mtime: when this build started
+        except OSError:
+            return None  # not registered: a collection meanwhile keeps what is younger than 10 minutes
+        if out_dir is not None:
+            from assetpipe.core.hashing import digest_bytes
+
+            target = os.path.abspath(out_dir)
+            reg = self.root / "outputs" / digest_bytes(target.encode()).split(":", 1)[1][:32]
+            try:
+                if not reg.exists():
+                    reg.parent.mkdir(exist_ok=True)
+                    self._write_small(reg, target.encode())
+            except OSError:
+                pass
+        return _BuildSession(fd, path)
+
+    def _write_small(self, path: Path, data: bytes) -> None:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+
+    def end_build(self, session, out_dir: Path | None = None, seconds: float = 0.0) -> None:
+        """Record this build's step lookups (``cache stats``: the hit rate of the last build),
+        unregister it, and collect when the cache exceeds its size limit (only after a build
+        that wrote to it, so a no-op build never walks the cache)."""
+        body = {"time": time.time(), "out": str(os.path.abspath(out_dir)) if out_dir else None,
+                "lookups": self.hits + self.misses, "hits": self.hits, "writes": self.writes,
+                "seconds": round(seconds, 3)}
+        try:
+            self._write_small(self.root / LAST_BUILD, json.dumps(body).encode())
+        except OSError:
+            pass
+        if session is not None:
+            session.close()
+        if self.writes:
+            from assetpipe.cache.maintenance import auto_collect
+
+            auto_collect(self.root)

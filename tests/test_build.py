@@ -345,3 +345,62 @@ def test_output_size_limit_fails_the_model_in_one_line(tmp_path):
     assert "over the per-model limit" in a["error"] and "\n" not in a["error"] and str(src / "ball0.obj") in a["error"]
     assert not (tmp_path / "out" / "ball0.json").exists()
     assert _cli("build", src, "-o", tmp_path / "out", "--cache", tmp_path / "c").returncode == 0
+
+
+# -- the same features on fixtures the repository holds or generates (run without the corpus) ------
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def test_outputs_are_byte_identical_across_runs_on_the_examples(tmp_path):
+    assert run_build(str(EXAMPLES), "-o", str(tmp_path / "a"), "-j", "1").exit_code == 0
+    assert run_build(str(EXAMPLES), "-o", str(tmp_path / "b"), "-j", "2").exit_code == 0
+    files_a, files_b = outputs_of(tmp_path / "a"), outputs_of(tmp_path / "b")
+    assert files_a == files_b and any(p.suffix == ".ktx2" for p in files_a)
+    for rel in files_a:
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+
+
+def test_points_and_lines_only_models_build_empty_with_a_warning_generated(tmp_path):
+    from gltf_builder import GltfBuilder
+
+    quad = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float32)
+    (tmp_path / "src").mkdir()
+    for name, mode in (("points", 0), ("lines", 1), ("strip", 5)):
+        b = GltfBuilder()
+        b.add_node(mesh=b.add_mesh([{"attributes": {"POSITION": b.add_accessor(quad)}, "mode": mode}]))
+        b.write_gltf(tmp_path / "src" / f"{name}.gltf")
+    out = tmp_path / "out"
+    r = run_build(str(tmp_path / "src"), "-o", str(out), "--json", str(tmp_path / "r.json"))
+    assert r.exit_code == 0, r.output
+    report = {a["id"]: a for a in json.loads((tmp_path / "r.json").read_text())["assets"]}
+    for name, word in (("points", "POINTS"), ("lines", "LINES")):
+        assert report[name]["status"] == "built" and any(word in w for w in report[name]["warnings"]), report[name]
+        assert load_seed_model(out / f"{name}.json").meshes == []
+    assert sum(m.indices.shape[0] for m in load_seed_model(out / "strip.json").meshes) == 2
+
+
+def test_same_file_names_in_different_folders_get_distinct_ids_on_the_examples(tmp_path):
+    for folder in ("a", "b"):
+        shutil.copytree(EXAMPLES / "pyramid", tmp_path / folder / "pyramid")
+    out = tmp_path / "out"
+    r = run_build(str(tmp_path / "a"), str(tmp_path / "b"), "-o", str(out), "--json", str(tmp_path / "r.json"))
+    assert r.exit_code == 0, r.output
+    ids = sorted(a["id"] for a in json.loads((tmp_path / "r.json").read_text())["assets"])
+    assert len(set(ids)) == 2 and all(i.endswith("pyramid") for i in ids)
+    for i in ids:
+        load_seed_model(out / f"{i}.json")
+
+
+def test_a_failed_rebuild_keeps_the_earlier_outputs_on_the_examples(tmp_path):
+    src = tmp_path / "src"
+    shutil.copytree(EXAMPLES / "crate", src)
+    out = tmp_path / "out"
+    assert run_build(str(src / "crate.gltf"), "-o", str(out)).exit_code == 0
+    before = {p: (out / p).read_bytes() for p in outputs_of(out)}
+    (src / "crate.bin").write_bytes(b"\0" * 10)  # truncated buffer
+    r = run_build(str(src / "crate.gltf"), "-o", str(out))
+    assert r.exit_code == 1
+    assert "crate.gltf" in r.output and "Traceback" not in r.output
+    assert {p: (out / p).read_bytes() for p in outputs_of(out)} == before
+    assert not list(out.rglob("*.tmp"))

@@ -8,6 +8,7 @@ import os
 import shutil
 import struct
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -203,6 +204,8 @@ def _ktx_parse_dir() -> Path | None:
     if os.environ.get("ASSETPIPE_KTX_PARSE"):
         candidates.append(Path(os.environ["ASSETPIPE_KTX_PARSE"]))
     candidates.append(REPO / ".venv" / "node" / "node_modules" / "ktx-parse")
+    # the virtual environment running the tests (setup.sh puts the node tools in it), wherever it is
+    candidates.append(Path(sys.prefix) / "node" / "node_modules" / "ktx-parse")
     npm = shutil.which("npm")
     if npm:
         try:

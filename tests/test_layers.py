@@ -12,6 +12,9 @@ up the layers when it runs):
 from __future__ import annotations
 
 import ast
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,7 +51,10 @@ def _imports(name: str, path: Path, known: set[str]) -> set[str]:
     is_pkg = path.stem == "__init__"
     base = name if is_pkg else name.rsplit(".", 1)[0]
     out = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    tree = ast.parse(path.read_text(), str(path))
+    if name == "assetpipe":  # the root's lazy API hooks: checked by their own test below
+        tree = _root_top_level(tree)
+    for node in ast.walk(tree):
         targets = []
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
@@ -93,13 +99,38 @@ def test_no_import_runs_up_the_layers():
     assert bad == []
 
 
+def _root_top_level(tree: ast.Module) -> ast.Module:
+    """The package root without its functions and classes (the lazy API hooks: PEP 562
+    ``__getattr__`` and the callable ``assetpipe.build``), which import only when an API name is
+    first used, long after ``import assetpipe`` finished."""
+    return ast.Module(body=[n for n in tree.body if not isinstance(n, (ast.FunctionDef, ast.ClassDef))],
+                      type_ignores=[])
+
+
+def _names_imported(tree: ast.AST) -> set[str]:
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    return imported | {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+
+
 def test_the_package_root_imports_only_the_standard_library():
     """``import assetpipe`` (which every ``assetpipe.*`` import runs first) stays light and
-    pulls no layer in."""
+    pulls no layer in: at import time only ``os`` and ``sys``; the API is imported lazily, by
+    the PEP 562 ``__getattr__`` and the callable ``assetpipe.build``, and nothing else is."""
     tree = ast.parse((ROOT / "assetpipe" / "__init__.py").read_text())
-    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert imported == {"os"}
+    assert _names_imported(_root_top_level(tree)) == {"os", "sys"}
+    lazy = {n.name: _names_imported(n) for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    assert {k: v for k, v in lazy.items() if v} == {"__getattr__": {"assetpipe", "assetpipe.build"},
+                                                     "_BuildModule": {"assetpipe.api"}}
+    top_imports = [n for n in ast.walk(_root_top_level(tree)) if isinstance(n, (ast.Import, ast.ImportFrom))]
+    assert all(n in tree.body for n in top_imports)  # no import hidden in a top-level if/try either
+
+
+def test_import_assetpipe_loads_no_layer_and_no_numpy():
+    code = ("import sys, assetpipe; assetpipe.__version__; "
+            "print(sorted(m for m in sys.modules if m.startswith('assetpipe') or m == 'numpy'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout
+    assert out.strip() == "['assetpipe']"
 
 
 def test_no_circles_between_modules():

@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -173,7 +174,7 @@ ERROR_CASES = [
 @pytest.mark.parametrize("obj, fragments", ERROR_CASES, ids=[str(i) for i in range(len(ERROR_CASES))])
 def test_errors_name_scene_object_and_problem(tmp_path, obj, fragments):
     path = _scene_with(tmp_path, GOOD_OBJ, obj)
-    with pytest.raises(SceneError) as info:
+    with pytest.raises(SceneError, match=f"^{re.escape(str(path))}: ") as info:
         load_scene(path)
     msg = str(info.value)
     assert "\n" not in msg
@@ -200,7 +201,7 @@ def test_errors_name_scene_object_and_problem(tmp_path, obj, fragments):
 def test_scene_level_errors(tmp_path, text, fragment):
     _scene_with(tmp_path)
     path = _write(tmp_path, text)
-    with pytest.raises(SceneError) as info:
+    with pytest.raises(SceneError, match=re.escape(fragment)) as info:
         load_scene(path)
     assert "\n" not in str(info.value) and str(info.value).startswith(f"{path}: ")
     assert fragment in str(info.value)
@@ -342,13 +343,13 @@ def test_select_levels_empty_intervals_and_edge_cases():
     # a first switch above 0: level 0 still serves nearer distances
     assert select_levels([5, 10], 0, 1) == [0]
     assert level_at([0, 10, 20], 19.9) == 1
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"not measured \(NaN\)"):
         select_levels([0, float("nan")], 0, 1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="must not decrease"):
         select_levels([0, 10, 5], 0, 1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="near 5 is beyond far 1"):
         select_levels([0, 10], 5, 1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="no LOD levels"):
         select_levels([], 0, 1)
 
 

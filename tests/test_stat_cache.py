@@ -105,7 +105,7 @@ def test_racy_window_boundary(tmp_path, monkeypatch):
 
 
 def test_missing_file_raises(tmp_path):
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="nope"):
         StatCache(None).digest(tmp_path / "nope")
 
 

@@ -164,7 +164,7 @@ def test_shard_folder_that_cannot_be_created_is_a_cache_error(store, monkeypatch
 
 
 def test_bad_digest_refused(store):
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="not a digest: .xxh3:not-hex!."):
         store.get_blob("xxh3:not-hex!")
 
 
@@ -203,3 +203,43 @@ def test_a_cache_folder_deleted_while_the_process_runs_is_made_again(tmp_path):
     s2 = Store(tmp_path / "c")  # the process remembers the folders it made: they must come back
     d2 = s2.put_blob(b"two")
     assert s2.get_blob(d2) == b"two" and s2.get_blob(d1) is None
+
+
+def test_export_blob_never_lets_an_output_edit_reach_the_blob(tmp_path):
+    store = Store(tmp_path / "cache")
+    d = store.put_blob(b"vertex bytes")
+    assert store.blob_path(d).stat().st_mode & 0o777 == 0o444
+    out = tmp_path / "out"
+    out.mkdir()
+    how = store.export_blob(d, out / "a.vtx", out)
+    assert how in ("reflink", "copy")  # the default: never the blob's own inode
+    assert (out / "a.vtx").stat().st_ino != store.blob_path(d).stat().st_ino
+    (out / "a.vtx").write_bytes(b"edited in place")  # open(..., "w"): the same inode
+    assert store.get_blob(d) == b"vertex bytes" and store.dropped == []
+
+
+def test_export_blob_hardlinks_only_when_asked_and_only_once(tmp_path, monkeypatch):
+    monkeypatch.setenv("ASSETPIPE_OUTPUT_LINKS", "hardlink")
+    store = Store(tmp_path / "cache")
+    d = store.put_blob(b"texture bytes")
+    (tmp_path / "o1").mkdir()
+    (tmp_path / "o2").mkdir()
+    assert store.export_blob(d, tmp_path / "o1" / "t.png", tmp_path / "o1") == "hardlink"
+    assert (tmp_path / "o1" / "t.png").stat().st_ino == store.blob_path(d).stat().st_ino
+    # a second output folder gets its own copy: a hand edit can reach at most one folder and the cache
+    assert store.export_blob(d, tmp_path / "o2" / "t.png", tmp_path / "o2") in ("reflink", "copy")
+    # and the cache never serves an edit made through the link: it is found and dropped
+    os.chmod(tmp_path / "o1" / "t.png", 0o644)
+    (tmp_path / "o1" / "t.png").write_bytes(b"edited")
+    assert store.get_blob(d) is None and len(store.dropped) == 1
+    with pytest.raises(FileNotFoundError, match=r"blob xxh3:[0-9a-f]+ for .*t2\.png vanished from the cache"):
+        store.export_blob(d, tmp_path / "o2" / "t2.png", tmp_path / "o2")
+
+
+def test_a_build_session_dropped_without_end_build_unregisters(tmp_path):
+    store = Store(tmp_path / "cache")
+    session = store.begin_build()
+    path = session[1]
+    assert path.exists()
+    del session  # a build that raised: its frame, and the session, are dropped
+    assert not path.exists() and list((tmp_path / "cache" / "builds").iterdir()) == []

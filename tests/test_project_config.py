@@ -1,0 +1,86 @@
+"""Team defaults from assetpipe.toml / [tool.assetpipe]: found from the inputs upward, overridden by
+flags, explained by --explain; bad files are one clear error."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from assetpipe.cli import main
+from assetpipe.project_config import ProjectConfigError, find_project_file, load_project_file, project_config_for
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def proj(tmp_path):
+    shutil.copytree(REPO / "examples" / "pyramid", tmp_path / "proj" / "art" / "pyramid")
+    return tmp_path
+
+
+def build(proj: Path, *args: str):
+    r = CliRunner().invoke(main, ["build", str(proj / "proj" / "art"), "-o", str(proj / "out"),
+                                  "--cache", str(proj / "cache"), "--json", str(proj / "r.json"), *args])
+    return r
+
+
+def layout_of(proj: Path) -> list[str]:
+    side = json.loads((proj / "out" / "pyramid.asset.json").read_text())
+    return [a["name"] for a in side["vertexLayout"]["attributes"]]
+
+
+def test_assetpipe_toml_sets_the_options_and_flags_override_it(proj):
+    (proj / "proj" / "assetpipe.toml").write_text('layout = ["position", "uv0", "normal"]\nlod = false\njobs = 1\n')
+    r = build(proj, "--explain")
+    assert r.exit_code == 0, r.output
+    assert layout_of(proj) == ["position", "uv0", "normal"]
+    where = str(proj / "proj" / "assetpipe.toml")
+    assert f"option layout: position,uv0,normal ({where})" in r.output
+    assert f"option no-lod: True ({where})" in r.output
+    assert "option simplifier: meshopt-attr (default)" in r.output
+    r = build(proj, "--layout", "position,uv0", "--explain")
+    assert r.exit_code == 0 and layout_of(proj) == ["position", "uv0"]
+    assert "option layout: position,uv0 (command line)" in r.output
+
+
+def test_pyproject_tool_table_is_found_from_the_inputs_upward(proj):
+    (proj / "pyproject.toml").write_text('[project]\nname = "game"\n\n[tool.assetpipe]\nlayout = "position,normal"\n')
+    (proj / "proj" / "pyproject.toml").write_text('[project]\nname = "no-table-here"\n')  # skipped: no [tool.assetpipe]
+    assert find_project_file(proj / "proj" / "art" / "pyramid" / "pyramid.obj") == proj / "pyproject.toml"
+    r = build(proj, "-j", "1")
+    assert r.exit_code == 0, r.output
+    assert layout_of(proj) == ["position", "normal"]
+
+
+def test_cache_is_relative_to_the_project_file(proj):
+    (proj / "proj" / "assetpipe.toml").write_text('cache = "../team-cache"\n')
+    cfg = project_config_for([proj / "proj" / "art"])
+    assert cfg.as_cli()["cache_dir"] == proj / "team-cache"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("colour = 1\n", "unknown key 'colour'"),
+    ("jobs = true\n", "jobs must be a whole number of worker processes, not True"),
+    ("lod = 'no'\n", "lod must be true or false"),
+    ("layout = [\n", "invalid TOML"),
+])
+def test_a_bad_project_file_is_one_clear_error(proj, text, message):
+    f = proj / "proj" / "assetpipe.toml"
+    f.write_text(text)
+    with pytest.raises(ProjectConfigError, match=f"^{re.escape(str(f))}: .*{re.escape(message)}"):
+        load_project_file(f)
+    r = build(proj)
+    assert r.exit_code == 1 and message in r.output and str(f) in r.output
+
+
+def test_inputs_under_different_project_files_are_refused(tmp_path):
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "assetpipe.toml").write_text("jobs = 1\n")
+    with pytest.raises(ProjectConfigError, match="the inputs lie under different project files"):
+        project_config_for([tmp_path / "a", tmp_path / "b"])
