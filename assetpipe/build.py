@@ -26,15 +26,22 @@ def _outputs_list(out_dir: Path, model_id: str) -> list[str]:
 
 
 def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1,
-              cache_dir: Path | None = None,
-              on_result: Callable[[AssetResult, int, int], None] | None = None) -> BuildReport:
+              cache_dir: Path | str | None = None,
+              on_result: Callable[[AssetResult, int, int], None] | None = None,
+              scheduler=None) -> BuildReport:
     """Build ``inputs`` (model files, folders, and scene files ``*.json``) into ``out_dir``.
 
     With scene files, only what the scenes reference is built (the other inputs are candidates,
     reported as skipped), each model with what its scenes need; ``OUT/<scene>.scene.json`` is
-    written per scene."""
+    written per scene.
+
+    ``cache_dir``: a folder, an fsspec URL for a shared remote tier behind the local cache
+    (:mod:`assetpipe.cache.remote`), or a store object. ``scheduler``: run the steps on a Dask cluster (an address
+    ``tcp://HOST:PORT``, a ``distributed.Client`` or cluster, or an
+    :class:`assetpipe.executor.DaskExecutor`); None: locally with ``jobs`` processes."""
     from assetpipe.cache.stat_cache import StatCache
     from assetpipe.cache.store import Store, default_cache_dir
+    from assetpipe.cache.remote import is_url, open_store
     from assetpipe.state import OutputState
     from assetpipe.core.writer import sweep_tmp
 
@@ -45,7 +52,12 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     sweep_tmp(out_dir)
-    store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
+    if hasattr(cache_dir, "get_record"):  # a store made by the caller (a TieredStore, say)
+        store = cache_dir
+    elif is_url(cache_dir):  # a remote tier (the farm's shared cache) behind the local folder
+        store = open_store(cache_dir)
+    else:
+        store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
     stat = StatCache(store.root / "stat-cache.json")
     state = OutputState(out_dir)
     results: list[AssetResult] = []
@@ -83,7 +95,8 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
 
     explain_steps = None
     if todo:
-        explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total)
+        explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total,
+                                       scheduler)
     results = [by_key[s.key] for s in specs] + results
     if scene_run is not None:
         results.extend(scene_run.write_outputs(state, store, stat, by_key, jobs))
@@ -97,11 +110,16 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
                        cache_dropped=list(store.dropped))
 
 
-def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total) -> dict:
+def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total, scheduler=None) -> dict:
     from assetpipe.graph import AssetState, Graph
 
     explain_prev = state.load_explain()
-    graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs)
+    executor = None
+    if scheduler is not None:
+        from assetpipe.executor import make_executor
+
+        executor = make_executor(scheduler, store)
+    graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs, executor=executor)
     assets = [AssetState(source=s.source, id=s.id, options=s.options, plan=s.plan, extra_sources=s.extra_sources,
                          key=s.key) for s in todo]
     graph.build(assets)

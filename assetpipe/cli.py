@@ -61,8 +61,13 @@ def eval_ratio(text: str) -> float:
               help="Write a JSON report (one entry per input) to this file.")
 @click.option("-j", "--jobs", type=click.IntRange(1, 256), default=1, show_default=True,
               help="Worker processes for the build steps (outputs are identical for any value).")
-@click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None,
-              help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe].")
+@click.option("--cache", "cache_dir", type=str, default=None,
+              help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe], "
+                   "or an fsspec URL (s3://bucket/prefix, file:///shared/cache) for a shared cache behind the default "
+                   "folder (needs assetpipe[farm]).")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Run the steps on this Dask scheduler's workers instead of locally (needs assetpipe[farm]; "
+                   "docs/FARM.md).")
 @click.option("--explain", is_flag=True, help="Say, for every step that ran, why it ran.")
 @click.option("-q", "--quiet", is_flag=True, help="Print only failures and the summary line.")
 @click.option("--layout", default=",".join(_D.mesh.layout), show_default=True,
@@ -74,7 +79,7 @@ def eval_ratio(text: str) -> float:
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
 @click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
               help="Downsize textures so neither side exceeds this (power of two steps).")
-def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
+def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, max_texture_size) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
     from assetpipe.build import run_build
@@ -85,7 +90,7 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout,
     try:
         with reporter:
             report = run_build(list(inputs), out_dir, options, jobs=jobs, cache_dir=cache_dir,
-                               on_result=reporter.on_result)
+                               on_result=reporter.on_result, scheduler=scheduler)
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
     if json_report:
