@@ -13,15 +13,13 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("s3fs", reason="needs the farm extra: pip install -e '.[test,farm]'")
+from farm_fixtures import S3Server, free_port, make_model, tree
 
-from farm_fixtures import S3Server, free_port, make_model, tree  # noqa: E402
-
-from assetpipe.build import run_build  # noqa: E402
-from assetpipe.cache.remote import TieredStore, open_store  # noqa: E402
-from assetpipe.cache.store import Store  # noqa: E402
-from assetpipe.core.hashing import digest_bytes  # noqa: E402
-from assetpipe.options import DEFAULT_BUILD_OPTIONS  # noqa: E402
+from assetpipe.build import run_build
+from assetpipe.cache.remote import TieredStore, open_store
+from assetpipe.cache.store import Store
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.options import DEFAULT_BUILD_OPTIONS
 
 REPO = Path(__file__).resolve().parents[1]
 
