@@ -9,8 +9,8 @@ Two executors exist:
 * :class:`DaskExecutor`: a Dask ``distributed`` cluster (``--scheduler tcp://HOST:PORT``, or
   ``run_build(..., scheduler=...)``). Workers never see the client's cache or output folder:
 
-  - the blobs a step reads (every ``xxh3:`` digest among its arguments that the client's
-    store holds) travel with the task, by content;
+  - the blobs a step reads (its blob arguments, :func:`input_blobs`) travel with the task,
+    by content;
   - the worker runs the task against a private scratch store, verifies nothing leaked in, and
     returns the record with the bytes of every blob it names;
   - the client checks each returned blob against its digest and writes it, and the record,
@@ -74,6 +74,21 @@ def blob_digests(value) -> list[str]:
         for v in value:
             out.extend(blob_digests(v))
     return out
+
+
+def input_blobs(fn, args: list) -> list[str]:
+    """The blobs a task reads (by digest): for the build's tasks, exactly their blob
+    arguments (the source digests an encode step lists are not sent); for any other task,
+    every digest among its arguments."""
+    if fn is steps.task_import:
+        return []
+    if fn in (steps.task_mesh, steps.task_lod, steps.task_encode):
+        return [args[1] if fn is steps.task_encode else args[0]]
+    if fn is steps.task_lod_handmade:
+        return list(args[0])
+    if fn is steps.task_texture:
+        return [args[0]["digest"]] if args[0].get("path") is None else []
+    return blob_digests(args)
 
 
 def _absolute(fn, args: list) -> list:
@@ -161,7 +176,7 @@ class DaskExecutor:
         for fn, _root, *args in calls:
             args = _absolute(fn, args)
             inputs = {}
-            for d in dict.fromkeys(blob_digests(args)):
+            for d in dict.fromkeys(input_blobs(fn, args)):
                 data = self.store.get_blob(d) if self.store.has_blob(d) else None
                 if data is not None:
                     inputs[d] = data

@@ -157,7 +157,7 @@ class TieredStore:
             return {}
         out: dict[str, bytes | None] = {}
         for p in paths:
-            v = got.get(p, got.get(self._fs._strip_protocol(p)) if hasattr(self._fs, "_strip_protocol") else None)
+            v = got.get(p)
             if isinstance(v, (bytes, bytearray)):
                 out[p] = bytes(v)
                 self.moved["down"] += len(v)
@@ -170,7 +170,25 @@ class TieredStore:
         return out
 
     def _fs_cat(self, paths: list[str]) -> dict:
-        return self._fs.cat(paths, on_error="return")
+        """path -> bytes or the exception, one GET per path, concurrent on async filesystems
+        (fsspec's own ``cat(list)`` measured 3.5x slower than ``cat_file`` on a 10 MB object)."""
+        fs = self._fs
+        if getattr(fs, "async_impl", False):
+            import asyncio
+
+            from fsspec.asyn import sync
+
+            async def fetch_all():
+                return await asyncio.gather(*[fs._cat_file(p) for p in paths], return_exceptions=True)
+
+            return dict(zip(paths, sync(fs.loop, fetch_all)))
+        out = {}
+        for p in paths:
+            try:
+                out[p] = fs.cat_file(p)
+            except Exception as exc:  # noqa: BLE001 - sorted out by the caller
+                out[p] = exc
+        return out
 
     def _put_many(self, items: dict[str, bytes]) -> bool:
         """Upload every path -> bytes (concurrently on object stores); False when the tier is down."""

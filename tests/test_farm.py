@@ -68,6 +68,9 @@ def test_farm_build_equals_local_build_and_a_second_machine_hits_the_shared_cach
     assert ex.moved["from_workers"] > 0 and ex.moved["to_workers"] > 0
     assert set(ex.per_step) == {"task_import", "task_mesh", "task_texture", "task_lod", "task_encode"}
     assert ex.per_step["task_import"]["to_workers"] == 0  # imports read sources by path, nothing else
+    # each encode step is sent exactly the blob its LOD step returned (and each LOD its mesh)
+    assert ex.per_step["task_encode"]["to_workers"] == ex.per_step["task_lod"]["from_workers"]
+    assert ex.per_step["task_lod"]["to_workers"] == ex.per_step["task_mesh"]["from_workers"]
     # machine 2: fresh output folder, fresh local tier, the same shared cache: nothing runs
     report2, ex2, _ = _farm_build(models, tmp_path, "m2", cluster.scheduler_address, shared)
     assert ex2.moved["tasks"] == 0 and ex2.client is None  # the scheduler was never contacted
