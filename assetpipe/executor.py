@@ -168,26 +168,48 @@ class DaskExecutor:
         return self.client
 
     def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
+        """Submit the calls with their input blobs, at most ``window`` in flight (so the
+        client never holds a whole phase's inputs at once), refilled as results arrive."""
         if not calls:
             return []
+        import warnings
+
+        from distributed import as_completed
+        from distributed.comm.core import CommClosedError
+
         client = self._connect()
         fp = environment_fingerprint()
-        futures, sent = [], []
-        for fn, _root, *args in calls:
+        workers = len(client.scheduler_info().get("workers", {})) or 8
+        window = max(16, 4 * workers)
+        results: list = [None] * len(calls)
+        pending = iter(enumerate(calls))
+        running: dict = {}
+        done = as_completed(loop=client.loop)
+
+        def submit_next() -> bool:
+            try:
+                i, (fn, _root, *args) = next(pending)
+            except StopIteration:
+                return False
             args = _absolute(fn, args)
             inputs = {}
             for d in dict.fromkeys(input_blobs(fn, args)):
                 data = self.store.get_blob(d) if self.store.has_blob(d) else None
                 if data is not None:
                     inputs[d] = data
-            size = sum(len(b) for b in inputs.values())
-            sent.append(size)
-            futures.append(client.submit(run_on_worker, fn, args, inputs, fp, pure=False,
-                                         key=f"{fn.__name__}-{uuid.uuid4().hex}"))
-        out = []
-        from distributed.comm.core import CommClosedError
+            with warnings.catch_warnings():  # "large graph": the inputs travel with the task on purpose
+                warnings.simplefilter("ignore", UserWarning)
+                f = client.submit(run_on_worker, fn, args, inputs, fp, pure=False,
+                                  key=f"{fn.__name__}-{uuid.uuid4().hex}")
+            running[f.key] = (i, fn, sum(len(b) for b in inputs.values()))
+            done.add(f)
+            return True
 
-        for (fn, *_), f, size in zip(calls, futures, sent):
+        for _ in range(window):
+            if not submit_next():
+                break
+        for f in done:
+            i, fn, size = running.pop(f.key)
             try:
                 status, value, secs, blobs = f.result()
             except (OSError, CommClosedError) as exc:
@@ -195,6 +217,7 @@ class DaskExecutor:
                                      "steps finished so far are cached") from None
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the step crashed every worker it met
                 status, value, secs, blobs = "internal", f"{type(exc).__name__} on the Dask cluster: {exc}", 0.0, {}
+            f.release()
             back = 0
             for digest, data in blobs.items():
                 back += len(data)
@@ -211,8 +234,9 @@ class DaskExecutor:
             st["to_workers"] += size
             st["from_workers"] += back
             st["seconds"] += secs
-            out.append((status, value, secs))
-        return out
+            results[i] = (status, value, secs)
+            submit_next()
+        return results
 
     def close(self):
         if self._own_client and self.client is not None:
