@@ -23,7 +23,7 @@ in this process through ``run_build`` (the CLI's code path without the interpret
    task, bytes of blobs returned, worker seconds per step kind), from the seeding build of
    part 2 (bytes uploaded) and the warm remote builds (bytes downloaded, requests).
 
-``--quick``: six corpus models, ``--no-lod``-free defaults, 2 repeats.
+``--quick``: six corpus models (default options, LODs on), 2 repeats.
 """
 
 from __future__ import annotations
