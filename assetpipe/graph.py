@@ -194,6 +194,8 @@ class Graph:
         results: dict[str, dict | None] = {}
         to_run: dict[str, tuple] = {}
         owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
+        if hasattr(self.store, "prefetch"):  # a remote cache tier: fetch the phase's hits in one batch
+            self.store.prefetch([digest_json(kin) for _, _, kin, _ in jobs])
         for assets, label, kin, call in jobs:
             key = digest_json(kin)
             for a in assets:

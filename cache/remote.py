@@ -263,18 +263,8 @@ class TieredStore:
         if rec is not None or self.notice is not None:
             return rec
         path = self._key("actions", key)
-        raw = self._get_many([path]).get(path)
-        if raw is None:
-            return None
-        try:
-            wrapper = json.loads(raw)
-            record = wrapper["record"]
-            ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
-        except (ValueError, KeyError, TypeError):
-            ok = False
-        if not ok:
-            self.local.dropped.append(f"remote {self.url}/actions/{key}: record is corrupt; rebuilt")
-            self._remove(path)
+        record = self._parse_record(key, path, self._get_many([path]).get(path))
+        if record is None:
             return None
         missing = {self._key("objects", d): d for d in dict.fromkeys(record.get("blobs", {}).values())
                    if not self.local.has_blob(d) or self.local.get_blob(d) is None}
@@ -287,6 +277,56 @@ class TieredStore:
         self.moved["records_fetched"] += 1
         self.local.put_record(key, record)
         return record
+
+    def _parse_record(self, key: str, path: str, raw: bytes | None) -> dict | None:
+        """The record in ``raw`` if its checksum holds; a corrupt one is reported and deleted."""
+        if raw is None:
+            return None
+        try:
+            wrapper = json.loads(raw)
+            record = wrapper["record"]
+            ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
+        except (ValueError, KeyError, TypeError):
+            ok = False
+        if not ok:
+            self.local.dropped.append(f"remote {self.url}/actions/{key}: record is corrupt; rebuilt")
+            self._remove(path)
+            return None
+        return record
+
+    def prefetch(self, keys: list[str], batch: int = 64) -> None:
+        """Copy the records under ``keys`` that the local tier lacks, and their blobs, from the
+        remote tier in concurrent batches (the graph calls this once per phase; one GET at a
+        time cost a round trip per record and per blob). What fails here is left to
+        :meth:`get_record`, which reports it."""
+        if self.notice is not None or self._connect() is None:
+            return
+        todo = {self._key("actions", k): k for k in dict.fromkeys(keys)
+                if not self.local._path("actions", k).exists()}
+        paths = list(todo)
+        records: dict[str, dict] = {}
+        for i in range(0, len(paths), batch):
+            got = self._get_many(paths[i:i + batch])
+            for p in paths[i:i + batch]:
+                rec = self._parse_record(todo[p], p, got.get(p))
+                if rec is not None:
+                    records[todo[p]] = rec
+        need = {self._key("objects", d): d for rec in records.values() for d in rec.get("blobs", {}).values()
+                if not self.local.has_blob(d)}
+        bad: set[str] = set()
+        blob_paths = list(need)
+        for i in range(0, len(blob_paths), batch):
+            got = self._get_many(blob_paths[i:i + batch])
+            for p in blob_paths[i:i + batch]:
+                data = self._verified(need[p], p, got.get(p))
+                if data is None:
+                    bad.add(need[p])
+                else:
+                    self.local.put_blob(data)
+        for key, rec in records.items():
+            if not bad.intersection(rec.get("blobs", {}).values()):
+                self.moved["records_fetched"] += 1
+                self.local.put_record(key, rec)
 
     def put_record(self, key: str, record: dict) -> None:
         """Into the local tier; then its blobs (those not known to be on the remote tier:
