@@ -28,20 +28,25 @@ def _outputs_list(out_dir: Path, model_id: str) -> list[str]:
 
 
 def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1,
-              cache_dir: Path | None = None,
+              cache_dir: Path | str | None = None,
               on_result: Callable[[AssetResult, int, int], None] | None = None,
-              limits: BuildLimits = DEFAULT_BUILD_LIMITS) -> BuildReport:
+              limits: BuildLimits = DEFAULT_BUILD_LIMITS, scheduler=None) -> BuildReport:
     """Build ``inputs`` (model files, folders, and scene files ``*.json``) into ``out_dir``.
 
     With scene files, only what the scenes reference is built (the other inputs are candidates,
     reported as skipped), each model with what its scenes need; ``OUT/<scene>.scene.json`` is
     written per scene.
 
+    ``cache_dir``: a folder, an fsspec URL for a shared remote tier behind the local cache
+    (:mod:`assetpipe.cache.remote`), or a store object. ``scheduler``: run the steps on a Dask cluster (an address
+    ``tcp://HOST:PORT``, a ``distributed.Client`` or cluster, or an
+    :class:`assetpipe.executor.DaskExecutor`); None: locally with ``jobs`` processes.
+
     One build at a time per output folder: a second one waits for ``OUT/.assetpipe/lock`` (and
     says so on stderr), then starts from the first one's state, so neither loses the other's
     sources or deletes its outputs."""
     from assetpipe import versions
-    from assetpipe.cache.stat_cache import StatCache
+    from assetpipe.cache.remote import is_url, open_store
     from assetpipe.cache.store import Store, default_cache_dir
     from assetpipe.core.writer import sweep_tmp
 
@@ -54,10 +59,15 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     try:
         t0 = time.perf_counter()
         sweep_tmp(out_dir)
-        store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
+        if hasattr(cache_dir, "get_record"):  # a store made by the caller (a TieredStore, say)
+            store = cache_dir
+        elif is_url(cache_dir):  # a remote tier (the farm's shared cache) behind the local folder
+            store = open_store(cache_dir)
+        else:
+            store = Store(Path(cache_dir) if cache_dir else default_cache_dir())
         versions.use_cache_dir(store.root)  # nothing is written outside -o and the cache
         session = store.begin_build(out_dir)  # for the cache collector and `assetpipe cache stats`
-        return _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits)
+        return _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits, scheduler)
     finally:
         lock.close()
 
@@ -84,7 +94,7 @@ def _lock_output(out_dir: Path):
     return f
 
 
-def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits) -> BuildReport:
+def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session, on_result, limits, scheduler) -> BuildReport:
     from assetpipe.cache.stat_cache import StatCache
     from assetpipe.state import OutputState
 
@@ -126,7 +136,7 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session
     explain_steps = None
     if todo:
         explain_steps = _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total,
-                                       limits)
+                                       limits, scheduler)
     results = [by_key[s.key] for s in specs] + results
     if scene_run is not None:
         results.extend(scene_run.write_outputs(state, store, stat, by_key, jobs))
@@ -146,12 +156,18 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session
                        cache_dropped=list(store.dropped))
 
 
-def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total, limits) -> dict:
+def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total, limits,
+                   scheduler=None) -> dict:
     from assetpipe.core.errors import AssetpipeError
     from assetpipe.graph import AssetState, Graph
 
     explain_prev = state.load_explain()
-    graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs)
+    executor = None
+    if scheduler is not None:
+        from assetpipe.executor import make_executor
+
+        executor = make_executor(scheduler, store)
+    graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs, executor=executor)
     assets = [AssetState(source=s.source, id=s.id, options=s.options, plan=s.plan, extra_sources=s.extra_sources,
                          key=s.key) for s in todo]
     try:

@@ -85,8 +85,13 @@ def eval_ratio(text: str) -> float:
 @click.option("-j", "--jobs", type=click.IntRange(1, 256), default=None,
               help="Worker processes for the build steps (outputs are identical for any value) "
                    "[default: the usable CPU count].")
-@click.option("--cache", "cache_dir", type=click.Path(path_type=Path), default=None,
-              help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe].")
+@click.option("--cache", "cache_dir", type=str, default=None,
+              help="Cache folder [default: $ASSETPIPE_CACHE, else $XDG_CACHE_HOME/assetpipe, else ~/.cache/assetpipe], "
+                   "or an fsspec URL (s3://bucket/prefix, file:///shared/cache) for a shared cache behind the default "
+                   "folder (needs assetpipe[farm]).")
+@click.option("--scheduler", default=None, metavar="tcp://HOST:PORT",
+              help="Run the steps on this Dask scheduler's workers instead of locally (needs assetpipe[farm]; "
+                   "docs/FARM.md).")
 @click.option("--explain", is_flag=True, help="Say, for every step that ran, why it ran.")
 @click.option("-q", "--quiet", is_flag=True, help="Print only failures and the summary line.")
 @click.option("--layout", default=",".join(_D.mesh.layout), show_default=True,
@@ -113,7 +118,7 @@ def eval_ratio(text: str) -> float:
 @click.option("--max-image-pixels", type=click.IntRange(1, None), default=_D.texture.max_pixels, show_default=True,
               help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
                    "double), checked from its header before decoding.")
-def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
+def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
           max_image_pixels) -> None:
     """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
@@ -158,7 +163,7 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout,
     try:
         with reporter:
             report = run_build(list(inputs), out_dir, options, jobs=jobs, cache_dir=cache_dir,
-                               on_result=reporter.on_result, limits=limits)
+                               on_result=reporter.on_result, limits=limits, scheduler=scheduler)
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
     if json_report:

@@ -151,15 +151,18 @@ class Executor:
 
 
 class Graph:
-    def __init__(self, store: Store, stat_cache: StatCache, options, previous: dict, jobs: int = 1):
+    def __init__(self, store: Store, stat_cache: StatCache, options, previous: dict, jobs: int = 1,
+                 executor=None):
         """``options``: :class:`assetpipe.options.BuildOptions`; ``previous``: the last build's
-        per-source step key inputs (for explanations), from the output state."""
+        per-source step key inputs (for explanations), from the output state; ``executor``:
+        where ready steps run (anything with ``map(calls)`` and ``close()``, such as
+        :class:`assetpipe.executor.DaskExecutor`); None: :class:`Executor` with ``jobs``."""
         self.store = store
         self.stat = stat_cache
         self.options = options
         self.previous = previous
         self.libs = versions.library_versions()
-        self.executor = Executor(jobs)
+        self.executor = executor if executor is not None else Executor(jobs)
 
     def _options(self, a: AssetState):
         return a.options if a.options is not None else self.options
@@ -196,6 +199,8 @@ class Graph:
         results: dict[str, dict | None] = {}
         to_run: dict[str, tuple] = {}
         owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
+        if hasattr(self.store, "prefetch"):  # a remote cache tier: fetch the phase's hits in one batch
+            self.store.prefetch([digest_json(kin) for _, _, kin, _ in jobs])
         for assets, label, kin, call in jobs:
             key = digest_json(kin)
             for a in assets:

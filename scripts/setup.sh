@@ -2,7 +2,7 @@
 # Set up assetpipe on a fresh Debian 12 machine (Python 3.11):
 #   - Debian packages: Mesa lavapipe, the Vulkan loader, validation layers, glslang, spirv-tools,
 #     and python3-venv (only what is missing; needs root or sudo);
-#   - a virtual environment in .venv with assetpipe installed editable, with its test extras.
+#   - a virtual environment in .venv with assetpipe installed editable, with its test and farm extras.
 # Idempotent: a second run installs nothing new.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -38,7 +38,7 @@ fi
 stamp=.venv/.assetpipe-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e ".[test]"
+  .venv/bin/python -m pip install -q -e ".[test,farm]"  # farm: the build-farm tests need Dask and s3fs
   touch "$stamp"
 fi
 if [ ! -f .venv/node/node_modules/ktx-parse/package.json ] || [ ! -f .venv/node/node_modules/gltfpack/package.json ]; then

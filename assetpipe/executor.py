@@ -1,0 +1,267 @@
+"""The executor seam: where the build graph's ready steps run.
+
+The graph hands each phase's missing steps to an executor as task calls
+``(task, store_root, *plain args)`` and gets ``(status, value, seconds)`` back in call order.
+Two executors exist:
+
+* :class:`assetpipe.graph.Executor`: inline, or a local process pool (``-j N``); tasks read
+  and write the local cache folder directly;
+* :class:`DaskExecutor`: a Dask ``distributed`` cluster (``--scheduler tcp://HOST:PORT``, or
+  ``run_build(..., scheduler=...)``). Workers never see the client's cache or output folder:
+
+  - the blobs a step reads (its blob arguments, :func:`input_blobs`) travel with the task,
+    by content;
+  - the worker runs the task against a private scratch store, verifies nothing leaked in, and
+    returns the record with the bytes of every blob it names;
+  - the client checks each returned blob against its digest and writes it, and the record,
+    to its own store (and so to the shared remote tier, when there is one).
+
+  Source files (the model files, their .bin/.mtl, image files) are read by the workers at
+  their absolute path on the client: every worker must see the source tree at the same path
+  (a shared filesystem, or the same checkout). A worker whose assetpipe, step versions or
+  library versions differ from the client's refuses the step (its output would be stored
+  under the client's key), so a mixed farm fails loudly instead of poisoning the cache.
+
+A worker killed mid-step is Dask's business: the scheduler reschedules its tasks on the
+others (``distributed.scheduler.allowed-failures``, default 3); the steps are pure, so the
+outputs are byte-identical to a local build.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import uuid
+from pathlib import Path
+
+from assetpipe import steps
+from assetpipe.core.errors import AssetpipeError
+from assetpipe.core.hashing import PREFIX, digest_bytes, digest_json
+
+CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler before giving up with one clear error
+
+
+class SchedulerError(AssetpipeError):
+    """The Dask scheduler cannot be reached (or was lost during the build)."""
+
+
+_fingerprint: str | None = None
+
+
+def environment_fingerprint() -> str:
+    """What a step's output depends on besides its inputs: assetpipe's version, the step
+    versions and the library versions (the last two are part of every key)."""
+    global _fingerprint
+    if _fingerprint is None:
+        from assetpipe import __version__, versions
+
+        _fingerprint = digest_json({"assetpipe": __version__, "steps": versions.STEP_VERSIONS,
+                                    "libs": versions.library_versions()})
+    return _fingerprint
+
+
+def blob_digests(value) -> list[str]:
+    """Every ``xxh3:`` digest among a task's arguments (nested lists, tuples, dicts)."""
+    out: list[str] = []
+    if isinstance(value, str):
+        if value.startswith(PREFIX):
+            out.append(value)
+    elif isinstance(value, dict):
+        for v in value.values():
+            out.extend(blob_digests(v))
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            out.extend(blob_digests(v))
+    return out
+
+
+def input_blobs(fn, args: list) -> list[str]:
+    """The blobs a task reads (by digest): for the build's tasks, exactly their blob
+    arguments (the source digests an encode step lists are not sent); for any other task,
+    every digest among its arguments."""
+    if fn is steps.task_import:
+        return []
+    if fn in (steps.task_mesh, steps.task_lod, steps.task_encode):
+        return [args[1] if fn is steps.task_encode else args[0]]
+    if fn is steps.task_lod_handmade:
+        return list(args[0])
+    if fn is steps.task_texture:
+        return [args[0]["digest"]] if args[0].get("path") is None else []
+    return blob_digests(args)
+
+
+def _absolute(fn, args: list) -> list:
+    """Source paths made absolute (a worker's working folder is not the client's)."""
+    args = list(args)
+    if fn is steps.task_import:
+        args[0] = os.path.abspath(args[0])
+    elif fn is steps.task_texture:
+        args[1] = os.path.abspath(args[1])
+    return args
+
+
+def run_on_worker(fn, args: list, inputs: dict[str, bytes], fingerprint: str):
+    """On a worker: run one task against a scratch store holding ``inputs``.
+
+    Returns (status, value, seconds, {digest: bytes} of the blobs the record names)."""
+    from assetpipe.cache.store import Store
+
+    mine = environment_fingerprint()
+    if mine != fingerprint:
+        return ("internal", f"worker {os.uname().nodename} pid {os.getpid()} runs a different assetpipe or "
+                f"library versions than the client (environment {mine} != {fingerprint}); install the same "
+                "versions on every worker", 0.0, {})
+    root = tempfile.mkdtemp(prefix="assetpipe-step-")
+    try:
+        store = Store(Path(root))
+        for digest, data in inputs.items():
+            if store.put_blob(data) != digest:
+                return "internal", f"input blob {digest} arrived damaged", 0.0, {}
+        status, value, secs = steps.call_task(fn, root, *args)
+        blobs: dict[str, bytes] = {}
+        if status == "ok":
+            for digest in value["blobs"].values():
+                data = store.get_blob(digest)
+                if data is None:
+                    return "internal", f"{fn.__name__} named blob {digest} but did not write it", secs, {}
+                blobs[digest] = data
+        return status, value, secs, blobs
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+class DaskExecutor:
+    """Runs task calls on a Dask cluster; results in call order (see the module docstring).
+
+    ``scheduler``: an address (``tcp://HOST:PORT``), a ``distributed.Client``, or a cluster
+    object (``LocalCluster``). The connection is made at the first step to run, so a build
+    with nothing to do never contacts the scheduler. ``store`` is the client's store (set by
+    :func:`assetpipe.build.run_build`)."""
+
+    def __init__(self, scheduler, store=None, timeout: float = CONNECT_TIMEOUT):
+        self.scheduler = scheduler
+        self.store = store
+        self.timeout = timeout
+        self.client = None
+        self._own_client = False
+        # bytes sent with tasks (inputs) and returned (outputs), and tasks run
+        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0}
+        self.per_step: dict[str, dict] = {}  # task name -> {"tasks", "to_workers", "from_workers", "seconds"}
+
+    def _connect(self):
+        if self.client is not None:
+            return self.client
+        from distributed import Client
+
+        if isinstance(self.scheduler, Client):
+            self.client = self.scheduler
+            return self.client
+        where = self.scheduler if isinstance(self.scheduler, str) else getattr(self.scheduler, "scheduler_address",
+                                                                               repr(self.scheduler))
+        try:
+            self.client = Client(self.scheduler, timeout=self.timeout, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise SchedulerError(f"cannot reach the Dask scheduler at {where} within {self.timeout:g} s "
+                                 f"({type(exc).__name__}); is `dask scheduler` running there?") from None
+        self._own_client = True
+        return self.client
+
+    def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
+        """Submit the calls with their input blobs, at most ``window`` in flight (so the
+        client never holds a whole phase's inputs at once), refilled as results arrive."""
+        if not calls:
+            return []
+        import warnings
+
+        from distributed import as_completed
+        from distributed.comm.core import CommClosedError
+
+        client = self._connect()
+        fp = environment_fingerprint()
+        workers = len(client.scheduler_info().get("workers", {})) or 8
+        window = max(16, 4 * workers)
+        results: list = [None] * len(calls)
+        pending = iter(enumerate(calls))
+        running: dict = {}
+        done = as_completed(loop=client.loop)
+
+        def submit_next() -> bool:
+            try:
+                i, (fn, _root, *args) = next(pending)
+            except StopIteration:
+                return False
+            args = _absolute(fn, args)
+            inputs = {}
+            for d in dict.fromkeys(input_blobs(fn, args)):
+                data = self.store.get_blob(d) if self.store.has_blob(d) else None
+                if data is not None:
+                    inputs[d] = data
+            with warnings.catch_warnings():  # "large graph": the inputs travel with the task on purpose
+                warnings.simplefilter("ignore", UserWarning)
+                f = client.submit(run_on_worker, fn, args, inputs, fp, pure=False,
+                                  key=f"{fn.__name__}-{uuid.uuid4().hex}")
+            running[f.key] = (i, fn, sum(len(b) for b in inputs.values()))
+            done.add(f)
+            return True
+
+        for _ in range(window):
+            if not submit_next():
+                break
+        for f in done:
+            i, fn, size = running.pop(f.key)
+            try:
+                status, value, secs, blobs = f.result()
+            except (OSError, CommClosedError) as exc:
+                raise SchedulerError(f"lost the Dask scheduler during the build ({type(exc).__name__}: {exc}); "
+                                     "steps finished so far are cached") from None
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the step crashed every worker it met
+                status, value, secs, blobs = "internal", f"{type(exc).__name__} on the Dask cluster: {exc}", 0.0, {}
+            f.release()
+            back = 0
+            for digest, data in blobs.items():
+                back += len(data)
+                if digest_bytes(data) != digest:
+                    status, value = "internal", f"a worker returned blob {digest} damaged"
+                    break
+                self.store.put_blob(data)
+            self.moved["to_workers"] += size
+            self.moved["from_workers"] += back
+            self.moved["tasks"] += 1
+            st = self.per_step.setdefault(fn.__name__, {"tasks": 0, "to_workers": 0, "from_workers": 0,
+                                                         "seconds": 0.0})
+            st["tasks"] += 1
+            st["to_workers"] += size
+            st["from_workers"] += back
+            st["seconds"] += secs
+            results[i] = (status, value, secs)
+            submit_next()
+        return results
+
+    def close(self):
+        if self._own_client and self.client is not None:
+            self.client.close()
+            self.client = None
+            self._own_client = False
+
+
+def make_executor(scheduler, store):
+    """The executor for ``run_build(scheduler=...)``: a :class:`DaskExecutor` given as is (the
+    caller owns it and reads its counters), else one made for this build."""
+    if isinstance(scheduler, DaskExecutor):
+        scheduler.store = store
+        return _Borrowed(scheduler)
+    return DaskExecutor(scheduler, store)
+
+
+class _Borrowed:
+    """A caller's executor: used, not closed, by the graph."""
+
+    def __init__(self, inner: DaskExecutor):
+        self.inner = inner
+
+    def map(self, calls):
+        return self.inner.map(calls)
+
+    def close(self):
+        pass

@@ -1,0 +1,135 @@
+"""Builds on a real Dask cluster (distributed.LocalCluster: 2 worker processes on 127.0.0.1):
+byte-identical to a local build, a second machine served by the shared cache, a worker killed
+mid-step, an unreachable scheduler."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from farm_fixtures import free_port, make_cluster, make_model, tree
+
+from assetpipe.build import run_build
+from assetpipe.cache.remote import TieredStore
+from assetpipe.cache.store import Store
+from assetpipe.executor import DaskExecutor, SchedulerError, blob_digests, run_on_worker
+from assetpipe.options import DEFAULT_BUILD_OPTIONS
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    c = make_cluster()
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory) -> Path:
+    src = tmp_path_factory.mktemp("models")
+    make_model(src, "a", 12, seed=1, texture=32)
+    make_model(src / "sub", "b", 20, seed=2, texture=16)
+    make_model(src, "big", 50, seed=3, texture=64)  # ~5k triangles: its LOD step is the slowest step
+    return src
+
+
+@pytest.fixture(scope="module")
+def local_build(models, tmp_path_factory):
+    """The reference: the same inputs built locally (-j 1), its output tree and steps."""
+    tmp = tmp_path_factory.mktemp("local")
+    report = run_build([models], tmp / "out", DEFAULT_BUILD_OPTIONS, cache_dir=Store(tmp / "cache"))
+    assert not report.failed
+    return tree(tmp / "out"), sum(len(r.steps) for r in report.results)
+
+
+def _farm_build(models, tmp: Path, name: str, scheduler, cache=None):
+    store = TieredStore(Store(tmp / f"{name}-local"), cache) if cache else Store(tmp / f"{name}-local")
+    ex = DaskExecutor(scheduler)
+    try:
+        report = run_build([models], tmp / f"{name}-out", DEFAULT_BUILD_OPTIONS, cache_dir=store, scheduler=ex)
+    finally:
+        ex.close()
+    assert not report.failed, [r.error for r in report.results]
+    return report, ex, store
+
+
+def test_farm_build_equals_local_build_and_a_second_machine_hits_the_shared_cache(cluster, models, local_build,
+                                                                                  tmp_path):
+    ref, n_steps = local_build
+    shared = (tmp_path / "shared").as_uri()
+    report, ex, store = _farm_build(models, tmp_path, "m1", cluster.scheduler_address, shared)
+    assert tree(tmp_path / "m1-out") == ref
+    assert ex.moved["tasks"] == n_steps and all(s["ran"] for r in report.results for s in r.steps)
+    # the client wrote every step's blobs (workers only saw their inputs, sent by content)
+    assert ex.moved["from_workers"] > 0 and ex.moved["to_workers"] > 0
+    assert set(ex.per_step) == {"task_import", "task_mesh", "task_texture", "task_lod", "task_encode"}
+    assert ex.per_step["task_import"]["to_workers"] == 0  # imports read sources by path, nothing else
+    # each encode step is sent exactly the blob its LOD step returned (and each LOD its mesh)
+    assert ex.per_step["task_encode"]["to_workers"] == ex.per_step["task_lod"]["from_workers"]
+    assert ex.per_step["task_lod"]["to_workers"] == ex.per_step["task_mesh"]["from_workers"]
+    # machine 2: fresh output folder, fresh local tier, the same shared cache: nothing runs
+    report2, ex2, _ = _farm_build(models, tmp_path, "m2", cluster.scheduler_address, shared)
+    assert ex2.moved["tasks"] == 0 and ex2.client is None  # the scheduler was never contacted
+    assert not any(s["ran"] for r in report2.results for s in r.steps)
+    assert tree(tmp_path / "m2-out") == ref
+
+
+def test_killed_worker_mid_step(cluster, models, local_build, tmp_path):
+    """SIGKILL the worker running an LOD step; Dask reschedules it, the output is unchanged."""
+    from distributed import Client
+
+    killed: dict = {}
+    stop = threading.Event()
+
+    def killer():
+        with Client(cluster.scheduler_address, set_as_default=False, timeout=30) as c:
+            pids = c.run(os.getpid)
+            while not stop.is_set():
+                for addr, keys in c.processing().items():
+                    lod = [k for k in keys if str(k).startswith("task_lod")]
+                    if lod and addr in pids:
+                        os.kill(pids[addr], signal.SIGKILL)
+                        killed.update(addr=addr, keys=lod)
+                        return
+                time.sleep(0.005)
+
+    t = threading.Thread(target=killer, daemon=True)
+    t.start()
+    try:
+        _farm_build(models, tmp_path, "k", cluster.scheduler_address)
+    finally:
+        stop.set()
+        t.join(30)
+    assert killed, "no LOD step was seen running"
+    assert tree(tmp_path / "k-out") == local_build[0]
+    # the killed step was handed to a worker again
+    for key in killed["keys"]:
+        starts = [s for s in cluster.scheduler.story(key) if len(s) > 2 and s[2] == "processing"]
+        assert len(starts) >= 2, cluster.scheduler.story(key)
+
+
+def test_unreachable_scheduler_is_one_clear_error(models, tmp_path):
+    address = f"tcp://127.0.0.1:{free_port()}"  # nothing listens there
+    t0 = time.monotonic()
+    with pytest.raises(SchedulerError, match=rf"cannot reach the Dask scheduler at {address} within 2 s"):
+        run_build([models], tmp_path / "out", DEFAULT_BUILD_OPTIONS, cache_dir=Store(tmp_path / "c"),
+                  scheduler=DaskExecutor(address, timeout=2))
+    assert time.monotonic() - t0 < 30
+
+
+def test_worker_with_other_versions_refuses(tmp_path):
+    """A worker whose libraries differ from the client's would store wrong bytes under the
+    client's key: it refuses the step."""
+    from assetpipe import steps
+
+    status, value, _, blobs = run_on_worker(steps.task_import, [str(tmp_path / "x.gltf")], {}, "xxh3:" + "0" * 32)
+    assert status == "internal" and "different assetpipe or library versions" in value and blobs == {}
+
+
+def test_blob_digests_finds_nested_digests():
+    d1, d2 = "xxh3:" + "1" * 32, "xxh3:" + "2" * 32
+    assert blob_digests(["root", d1, [{"a": d2, "b": "xxh3"}], 3]) == [d1, d2]
