@@ -11,6 +11,7 @@ from assetpipe import __version__
 from assetpipe.core.errors import AssetpipeError
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 from assetpipe.pipelines.lod_options import SIMPLIFIERS
+from assetpipe.pipelines.texture_options import TEXTURE_CODECS
 
 _D = DEFAULT_BUILD_OPTIONS
 
@@ -22,7 +23,8 @@ def main() -> None:
 
 
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
-                   lock_border: bool, max_texture_size: int | None):
+                   lock_border: bool, max_texture_size: int | None, texture_compression: str | None = None,
+                   texture_zstd: bool = False):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
     import dataclasses
 
@@ -42,6 +44,10 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                 changes["lock_border"] = True
             lod = dataclasses.replace(d.lod, **changes)
         texture = dataclasses.replace(d.texture, max_size=max_texture_size) if max_texture_size else d.texture
+        if texture_compression:
+            texture = dataclasses.replace(texture, compression=texture_compression)
+        if texture_zstd:
+            texture = dataclasses.replace(texture, supercompression="zstd")
     except (ValueError, TypeError) as exc:
         raise click.BadParameter(str(exc)) from None
     return BuildOptions(mesh=mesh, lod=lod, texture=texture)
@@ -74,13 +80,18 @@ def eval_ratio(text: str) -> float:
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
 @click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
               help="Downsize textures so neither side exceeds this (power of two steps).")
+@click.option("--texture-compression", type=click.Choice(TEXTURE_CODECS), default=None,
+              help=f"GPU block compression of the KTX2 textures: bc (BC7/BC5/BC4), etc2 (ETC2/EAC) "
+                   f"[default: {_D.texture.compression}].")
+@click.option("--texture-zstd", is_flag=True, help="Zstandard-supercompress the KTX2 levels (KTX2 scheme 2).")
 def build(inputs, out_dir, json_report, jobs, cache_dir, explain, quiet, layout, lod_ratios, no_lod,
-          simplifier, lock_border, max_texture_size) -> None:
+          simplifier, lock_border, max_texture_size, texture_compression, texture_zstd) -> None:
     """Build INPUTS (.gltf, .glb, .obj files, or folders searched recursively) into OUT."""
     from assetpipe.build import run_build
     from assetpipe.progress import Reporter
 
-    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size)
+    options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size,
+                             texture_compression, texture_zstd)
     reporter = Reporter(quiet=quiet, explain=explain)
     try:
         with reporter:

@@ -7,7 +7,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 IMPORT = 2  # 2: geometry-only blob
 MESH = 2  # 2: non-finite UVs cleaned before tangents are derived
 LOD = 3  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack
-TEXTURE = 1
+TEXTURE = 2  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression
 ENCODE = 1
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
 
@@ -16,7 +16,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 
 
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-          "point-cloud-utils", "fast-simplification")
+          "point-cloud-utils", "fast-simplification", "etcpak", "zstandard")
 _cached: dict | None = None
 
 
