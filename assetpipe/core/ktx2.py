@@ -31,7 +31,8 @@ ETC2 (161), texelBlockDimension 3x3 (4x4 texels), bytesPlane0 = block bytes, one
 lower 0, upper 0xFFFFFFFF, transfer sRGB for the ``*_SRGB`` formats else linear.
 
 Supercompression: scheme 0 (none) or 2 (Zstandard, the ``zstandard`` package, imported only
-then): each level is one Zstandard frame, ``byteLength`` its compressed size and
+then): each level is one Zstandard frame (with its content checksum, so a corrupted level is
+caught), ``byteLength`` its compressed size and
 ``uncompressedByteLength`` the level's raw size; no supercompression global data; levels are
 not padded (alignment 1), as the specification requires for supercompressed files.
 
@@ -354,7 +355,8 @@ def write_ktx2(levels: Sequence[np.ndarray], vk_format: int, kv: dict[str, bytes
     if supercompression == SUPERCOMPRESSION_ZSTD:
         import zstandard  # noqa: PLC0415 - only supercompressed builds need it
 
-        compress = zstandard.ZstdCompressor(level=zstd_level, write_content_size=True).compress
+        compress = zstandard.ZstdCompressor(level=zstd_level, write_content_size=True,
+                                              write_checksum=True).compress
 
     offsets, lengths, raw_lengths = [0] * n, [0] * n, [0] * n
     chunks: list[bytes] = []
