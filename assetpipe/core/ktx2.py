@@ -301,7 +301,7 @@ def expected_level_shapes(width: int, height: int, count: int) -> list[tuple[int
 
 def write_ktx2(levels: Sequence[np.ndarray], vk_format: int, kv: dict[str, bytes] | None = None, *,
                width: int | None = None, height: int | None = None,
-               supercompression: int = SUPERCOMPRESSION_NONE, zstd_level: int = 19) -> bytes:
+               supercompression: int = SUPERCOMPRESSION_NONE, zstd_level: int = 3) -> bytes:
     """Serialise a mip chain as KTX 2.0.
 
     ``levels``: level 0 first. For RGBA8 (``vk_format`` 43 sRGB or 37 UNORM): each
