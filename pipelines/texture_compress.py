@@ -135,6 +135,30 @@ def _eac_r11(data: bytes, w: int, h: int) -> bytes:
     return np.ascontiguousarray(rg[:, :8]).tobytes()
 
 
+_STRIP_TEXELS = 1 << 18  # levels above this many texels are split into strips (256 K texels each)
+_POOL = None
+
+
+def _pool():
+    """Threads for strips (etcpak releases the GIL while encoding)."""
+    global _POOL
+    if _POOL is None:
+        import os  # noqa: PLC0415
+        from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+        _POOL = ThreadPoolExecutor(max_workers=max(1, len(os.sched_getaffinity(0))),
+                                   thread_name_prefix="texture-compress")
+    return _POOL
+
+
+def _strips(ph: int, pw: int) -> list[tuple[int, int]]:
+    """Row ranges (multiples of 4) of about ``_STRIP_TEXELS`` each covering ``ph`` rows."""
+    if ph * pw <= _STRIP_TEXELS:
+        return [(0, ph)]
+    rows = max(4, (_STRIP_TEXELS // pw) // 4 * 4)
+    return [(y, min(ph, y + rows)) for y in range(0, ph, rows)]
+
+
 def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     """One ``(h, w, 4)`` uint8 RGBA level -> its blocks ``(ceil(h / 4), ceil(w / 4), bytes)``."""
     if level.ndim != 3 or level.shape[2] != 4 or level.dtype != np.uint8:
@@ -142,7 +166,12 @@ def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     h, w = level.shape[:2]
     padded = pad_to_blocks(level)
     ph, pw = padded.shape[:2]
-    data = _encoder(fmt.vk_format)(padded.tobytes(), pw, ph)
+    encode = _encoder(fmt.vk_format)
+    strips = _strips(ph, pw)
+    if len(strips) == 1:
+        data = encode(padded.tobytes(), pw, ph)
+    else:  # blocks are independent: strips of block rows give the same bytes, on every core
+        data = b"".join(_pool().map(lambda r: encode(padded[r[0]:r[1]].tobytes(), pw, r[1] - r[0]), strips))
     shape = (ph // 4, pw // 4, fmt.block_bytes)
     out = np.frombuffer(data, dtype=np.uint8)
     if out.size != shape[0] * shape[1] * shape[2]:  # pragma: no cover - the library's contract
