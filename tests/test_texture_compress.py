@@ -363,3 +363,20 @@ def test_corpus_every_level_of_every_texture(corpus, codec):
                 assert q >= goal, f"{where}: {q:.2f} dB"
         count += 1
     assert count >= 30  # 36 uses in the shared corpus today
+
+
+def test_cli_option(tmp_path):
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+
+    repo = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["build", str(repo / "examples" / "crate" / "crate.gltf"), "-o", str(out), "-q",
+                                  "--no-lod", "--texture-compression", "etc2", "--texture-zstd"])
+    assert r.exit_code == 0, r.output
+    tex = json.loads((out / "crate.asset.json").read_text())["materials"][0]["textures"]["baseColor"]
+    img = read_ktx2((out / tex["ktx2"]).read_bytes())
+    assert tex["vkFormat"] == img.vk_format == 148 and img.supercompression == 2
+    r = CliRunner().invoke(main, ["build", "x.gltf", "--texture-compression", "astc"])
+    assert r.exit_code == 2 and "'astc' is not one of 'none', 'bc', 'etc2'" in r.output
