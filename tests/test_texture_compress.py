@@ -37,9 +37,9 @@ NORMAL_DEG = 2.0  # normal maps: mean angular error <= 2 degrees
 ETC2_LEVEL0_DB = 30.0
 # RMS error (8-bit units) of one flat colour in the format: BC4/BC5/BC7 endpoints hold 7-8 bits
 # (BC7's mode 6 shares a p-bit, so alpha can come out 254): 1 unit; ETC2/EAC base colours hold
-# 4-5 bits per channel plus a table offset: up to 5.1 units seen (the 1x1 level of the corpus'
-# MatBed_baseColor.jpg: 34.0 dB), 6 allowed.
-FLAT_RMS = {131: 1.0, 132: 1.0, 134: 1.0, 161: 6.0}
+# 4-5 bits per channel plus a table offset: etcpak was off by up to 7.2 units RMS (the 1x1 level
+# of the corpus' CesiumMan.jpg: 31.0 dB), 8 allowed.
+FLAT_RMS = {131: 1.0, 132: 1.0, 134: 1.0, 161: 8.0}
 
 
 def photo(h: int, w: int, seed: int = 7, alpha: bool = False) -> np.ndarray:
@@ -132,10 +132,10 @@ def check_against_flat_blocks(level: np.ndarray, q: float, vk: int, role: str, k
     flat = block_mean_quality(level, vk, role)
     if role == ROLE_NORMAL:  # slack: x and y are quantised (to 8 bits in BC5), 0.5 degrees
         assert q <= flat + 0.5, f"level {k}: {q:.2f} degrees, flat blocks {flat:.2f}"
-    else:  # in MSE, plus what a flat colour costs in the format (FLAT_RMS)
-        mse, mse_flat = 255.0 ** 2 / 10 ** (q / 10), 255.0 ** 2 / 10 ** (flat / 10)
-        assert mse <= mse_flat + FLAT_RMS[BLOCK_FORMATS[vk].model] ** 2, \
-            f"level {k}: {q:.2f} dB, flat blocks {flat:.2f}"
+    else:  # RMS error: flat blocks' plus what storing a flat colour costs in the format (the
+        # triangle inequality: an encoder that stored the flat blocks would be within this)
+        rms, rms_flat = 255.0 / 10 ** (q / 20), 255.0 / 10 ** (flat / 20)
+        assert rms <= rms_flat + FLAT_RMS[BLOCK_FORMATS[vk].model], f"level {k}: {q:.2f} dB, flat blocks {flat:.2f}"
 
 
 def block_mean_quality(level: np.ndarray, vk: int, role: str) -> float:
