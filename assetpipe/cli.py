@@ -12,6 +12,7 @@ from assetpipe.core.errors import AssetpipeError
 from assetpipe.build_types import DEFAULT_BUILD_LIMITS
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 from assetpipe.pipelines.lod_options import SIMPLIFIERS
+from assetpipe.pipelines.texture_options import TEXTURE_CODECS
 
 _D = DEFAULT_BUILD_OPTIONS
 
@@ -24,7 +25,8 @@ def main() -> None:
 
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
                    lock_border: bool, max_texture_size: int | None, recenter: bool = False,
-                   lod_max_error: float | None = None, lod_screen_sizes: str | None = None):
+                   lod_max_error: float | None = None, lod_screen_sizes: str | None = None,
+                   texture_compression: str | None = None, texture_zstd: bool = False):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
     import dataclasses
 
@@ -50,6 +52,10 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                 changes["target_screen_sizes"] = (0.0, *(float(x) for x in lod_screen_sizes.split(",")))
             lod = dataclasses.replace(d.lod, **changes)
         texture = dataclasses.replace(d.texture, max_size=max_texture_size) if max_texture_size else d.texture
+        if texture_compression:
+            texture = dataclasses.replace(texture, compression=texture_compression)
+        if texture_zstd:
+            texture = dataclasses.replace(texture, supercompression="zstd")
     except (ValueError, TypeError, AssetpipeError) as exc:  # ConfigError: an option out of range
         raise click.BadParameter(str(exc)) from None
     return BuildOptions(mesh=mesh, lod=lod, texture=texture)
@@ -118,9 +124,13 @@ def eval_ratio(text: str) -> float:
 @click.option("--max-image-pixels", type=click.IntRange(1, None), default=_D.texture.max_pixels, show_default=True,
               help="Refuse an image decoding to more memory than this many RGBA8 texels (a 16-bit image counts "
                    "double), checked from its header before decoding.")
+@click.option("--texture-compression", type=click.Choice(TEXTURE_CODECS), default=None,
+              help=f"GPU block compression of the KTX2 textures: bc (BC7/BC5/BC4), etc2 (ETC2/EAC) "
+                   f"[default: {_D.texture.compression}].")
+@click.option("--texture-zstd", is_flag=True, help="Zstandard-supercompress the KTX2 levels (KTX2 scheme 2).")
 def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
-          max_image_pixels) -> None:
+          max_image_pixels, texture_compression, texture_zstd) -> None:
     """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
     files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
     what its objects can use, and OUT/<scene>.scene.json lists the instances."""
@@ -135,10 +145,11 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
     given = dict(jobs=jobs, cache_dir=cache_dir, layout=layout, lod_ratios=lod_ratios, no_lod=no_lod,
                  simplifier=simplifier, lock_border=lock_border, lod_max_error=lod_max_error,
                  lod_screen_sizes=lod_screen_sizes, max_texture_size=max_texture_size, recenter=recenter,
-                 max_output_mb=max_output_mb, max_image_pixels=max_image_pixels)
+                 max_output_mb=max_output_mb, max_image_pixels=max_image_pixels,
+                 texture_compression=texture_compression, texture_zstd=texture_zstd)
     values, origin = _project_defaults(inputs, **given)
     (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, lod_max_error, lod_screen_sizes,
-     max_texture_size, recenter, max_output_mb, max_image_pixels) = values
+     max_texture_size, recenter, max_output_mb, max_image_pixels, texture_compression, texture_zstd) = values
     if jobs is None:
         jobs = usable_cpus()  # as ninja: the CPUs this process may run on
     if explain:
@@ -150,12 +161,13 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  "lod_max_error": _D.lod.max_error if lod_max_error is None else lod_max_error,
                  "lod_screen_sizes": lod_screen_sizes or "none",
                  "max_texture_size": max_texture_size or "none", "recenter": recenter,
-                 "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels}
+                 "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels,
+                 "texture_compression": texture_compression or _D.texture.compression, "texture_zstd": texture_zstd}
         for name, where in origin.items():
             click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
-                             lod_max_error, lod_screen_sizes)
+                             lod_max_error, lod_screen_sizes, texture_compression, texture_zstd)
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))

@@ -40,6 +40,8 @@ KEYS: dict[str, tuple[tuple[type, ...], str]] = {
     "recenter": ((bool,), "true or false"),
     "max_output_mb": ((int, float), "a size in MiB"),
     "max_image_pixels": ((int,), "a whole number of texels"),
+    "texture_compression": ((str,), "none, bc or etc2"),
+    "texture_zstd": ((bool,), "true or false"),
     "jobs": ((int,), "a whole number of worker processes"),
     "cache": ((str,), "a folder, relative to the project file"),
 }
@@ -69,7 +71,7 @@ class ProjectConfig:
             r = v["lod_screen_sizes"]
             out["lod_screen_sizes"] = ",".join(f"{x:g}" for x in r) if isinstance(r, list) else r
         for key in ("simplifier", "lock_border", "max_texture_size", "jobs", "lod_max_error", "recenter",
-                    "max_output_mb", "max_image_pixels"):
+                    "max_output_mb", "max_image_pixels", "texture_compression", "texture_zstd"):
             if key in v:
                 out[key] = v[key]
         if "cache" in v:

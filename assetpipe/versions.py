@@ -9,7 +9,7 @@ IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate 
 MESH = 3  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates
 LOD = 5  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
-TEXTURE = 1
+TEXTURE = 2  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
 
@@ -18,7 +18,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 
 
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-          "fcpw", "fast-simplification", "mapbox_earcut")
+          "fcpw", "fast-simplification", "mapbox_earcut", "etcpak", "zstandard")
 _cached: dict | None = None
 _memo_dir = None  # the build's cache folder (use_cache_dir); None: the default one
 

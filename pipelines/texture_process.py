@@ -4,6 +4,11 @@ Pure: bytes in, bytes out. The build writes ``level0`` to ``textures/<digest><le
 (when ``level0_shared``; see below) and ``ktx2`` to ``textures/<digest>-<role>.ktx2``, and
 copies ``width``, ``height``, ``levels``, ``vk_format`` and ``srgb`` (``colorSpace``) into the
 sidecar.
+
+With ``options.compression`` ``"bc"`` or ``"etc2"`` the KTX2 holds block-compressed levels
+(:mod:`assetpipe.pipelines.texture_compress`), each compressed from the chain's own level after
+``max_size`` dropped any top levels (nothing is compressed that is not kept); the level-0
+PNG/JPEG for ``texturePath`` is unchanged.
 """
 
 from __future__ import annotations
@@ -14,7 +19,8 @@ import cv2
 import numpy as np
 
 from assetpipe.core.errors import InvalidTextureError
-from assetpipe.core.ktx2 import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, write_ktx2
+from assetpipe.core.ktx2 import (SUPERCOMPRESSION_NONE, SUPERCOMPRESSION_ZSTD, VK_FORMAT_R8G8B8A8_SRGB,
+                                 VK_FORMAT_R8G8B8A8_UNORM, write_ktx2)
 from assetpipe.pipelines.model import ImageSource
 from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255
 from assetpipe.pipelines.texture_mips import build_mip_chain
@@ -92,9 +98,20 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
     source_h, source_w = rgba.shape[:2]
     alpha_below = has_alpha_below_255(rgba)
     chain = build_mip_chain(rgba, role, alpha_mode, alpha_cutoff, options)
-    vk_format = VK_FORMAT_R8G8B8A8_SRGB if chain.srgb else VK_FORMAT_R8G8B8A8_UNORM
+    scheme = SUPERCOMPRESSION_ZSTD if options.supercompression == "zstd" else SUPERCOMPRESSION_NONE
     try:
-        ktx2 = write_ktx2(chain.levels, vk_format)
+        if options.compression == "none":
+            vk_format = VK_FORMAT_R8G8B8A8_SRGB if chain.srgb else VK_FORMAT_R8G8B8A8_UNORM
+            ktx2 = write_ktx2(chain.levels, vk_format, supercompression=scheme, zstd_level=options.zstd_level)
+        else:
+            from assetpipe.pipelines.texture_compress import choose_format, compress_chain  # noqa: PLC0415
+
+            has_alpha = any(has_alpha_below_255(lv) for lv in chain.levels)
+            fmt = choose_format(options.compression, role, chain.srgb, has_alpha)
+            blocks = compress_chain(chain.levels, fmt)
+            vk_format = fmt.vk_format
+            ktx2 = write_ktx2(blocks.levels, vk_format, width=chain.width, height=chain.height,
+                              supercompression=scheme, zstd_level=options.zstd_level)
     except ValueError as exc:  # pragma: no cover - the chain is built to fit
         raise InvalidTextureError(image.origin, f"cannot write KTX2: {exc}") from None
 

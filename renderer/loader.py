@@ -9,7 +9,8 @@ checked while loading, so a broken build is reported by name instead of drawing 
 * the vertex layout's attributes (position required; uv0 and a colour optional).
 
 Textures: the base colour's KTX2 is uploaded with all its levels exactly as stored (no
-mip generation here). A material without a KTX2 falls back to its ``texturePath`` PNG/JPEG
+mip generation here), block-compressed formats (BC7, ETC2, ...) as blocks; a device that cannot
+sample a block format gets the levels decoded on the CPU, and a note says so. A material without a KTX2 falls back to its ``texturePath`` PNG/JPEG
 decoded with Pillow as level 0 only, and a note says so.
 """
 
@@ -49,21 +50,28 @@ def read_ktx2(data: bytes) -> Any:
 
 @dataclass
 class Texture:
-    """A texture ready for upload: levels (h, w, 4) uint8, level 0 first."""
+    """A texture ready for upload: levels (h, w, 4) uint8, level 0 first; for a block format
+    (``assetpipe.core.ktx2.BLOCK_FORMATS``) each level's blocks ``(ceil(h/4), ceil(w/4), bytes)``
+    and ``size`` = level 0's (width, height) in texels."""
 
     name: str
     levels: list[np.ndarray]
     vk_format: int
     sampler: dict[str, Any] = field(default_factory=dict)
     from_ktx2: bool = True
+    size: tuple[int, int] | None = None
 
     @property
     def width(self) -> int:
-        return int(self.levels[0].shape[1])
+        return int(self.size[0]) if self.size else int(self.levels[0].shape[1])
 
     @property
     def height(self) -> int:
-        return int(self.levels[0].shape[0])
+        return int(self.size[1]) if self.size else int(self.levels[0].shape[0])
+
+    def level_size(self, k: int) -> tuple[int, int]:
+        """(width, height) of level ``k`` in texels."""
+        return max(1, self.width >> k), max(1, self.height >> k)
 
 
 @dataclass
@@ -214,12 +222,15 @@ def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_p
             img = read_ktx2(ktx_path.read_bytes())
         except Exception as exc:  # noqa: BLE001 - any reader failure is a bad texture
             raise InvalidTextureError(ktx_path, f"cannot read KTX2: {exc}") from exc
-        if int(img.vk_format) not in (VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM):
-            raise InvalidTextureError(ktx_path, f"vkFormat {img.vk_format} cannot be drawn "
-                                                "(R8G8B8A8 SRGB/UNORM expected)")
         levels = [np.ascontiguousarray(lv, np.uint8) for lv in img.levels]
         if not levels:
             raise InvalidTextureError(ktx_path, "KTX2 has no levels")
+        if getattr(img, "block_format", None) is not None:  # shapes checked by the reader
+            return Texture(name=str(ktx_rel), levels=levels, vk_format=int(img.vk_format), sampler=sampler,
+                           size=(int(img.width), int(img.height)))
+        if int(img.vk_format) not in (VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM):
+            raise InvalidTextureError(ktx_path, f"vkFormat {img.vk_format} cannot be drawn "
+                                                "(R8G8B8A8 SRGB/UNORM or a BC/ETC2 block format expected)")
         for i, lv in enumerate(levels):
             expect = (max(int(img.height) >> i, 1), max(int(img.width) >> i, 1), 4)
             if lv.shape != expect:

@@ -221,9 +221,12 @@ class Renderer:
             minLod=0.0, maxLod=0.25 if no_mips else float(levels),
             borderColor=vk.VK_BORDER_COLOR_FLOAT_OPAQUE_WHITE), None)
 
-    def _upload_texture(self, tex: Texture) -> Image:
-        """An image with every level of ``tex`` copied in as stored, ready for sampling."""
+    def _upload_texture(self, tex: Texture, notes: list[str] | None = None) -> Image:
+        """An image with every level of ``tex`` copied in as stored, ready for sampling. A block
+        format the device cannot sample is decoded on the CPU first (said in ``notes``)."""
         vk, ctx = self.vk, self.ctx
+        if tex.size is not None and not ctx.can_sample(tex.vk_format):
+            tex = _decoded(tex, ctx.info.name, notes)
         levels = tex.levels
         image = ctx.create_image(tex.width, tex.height, tex.vk_format,
                                  vk.VK_IMAGE_USAGE_SAMPLED_BIT | vk.VK_IMAGE_USAGE_TRANSFER_DST_BIT,
@@ -237,7 +240,7 @@ class Renderer:
             imageSubresource=vk.VkImageSubresourceLayers(aspectMask=vk.VK_IMAGE_ASPECT_COLOR_BIT, mipLevel=i,
                                                          baseArrayLayer=0, layerCount=1),
             imageOffset=vk.VkOffset3D(x=0, y=0, z=0),
-            imageExtent=vk.VkExtent3D(width=lv.shape[1], height=lv.shape[0], depth=1))
+            imageExtent=vk.VkExtent3D(width=tex.level_size(i)[0], height=tex.level_size(i)[1], depth=1))
             for i, (lv, off) in enumerate(zip(levels, offsets))]
 
         def record(cmd: Any) -> None:
@@ -285,7 +288,7 @@ class Renderer:
                 slots.append((0, 0))
                 continue
             k = len(images)
-            images.append(self._upload_texture(m.texture))
+            images.append(self._upload_texture(m.texture, model.notes))
             samplers.append(self._make_sampler(m.texture.sampler, len(m.texture.levels)))
             slots.append((k // per_set, 1 + k % per_set))
         n_sets = max(1, math.ceil(len(images) / per_set))
@@ -473,3 +476,17 @@ class Renderer:
         vk.vkDestroyShaderModule(dev, self._vert, None)
         vk.vkDestroyShaderModule(dev, self._frag, None)
         self._vert = None
+
+
+def _decoded(tex: Texture, device: str, notes: list[str] | None) -> Texture:
+    """``tex`` (a block format) decoded to RGBA8 levels, for a device that cannot sample it."""
+    from assetpipe.core.ktx2 import (BLOCK_FORMATS, VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM,  # noqa: PLC0415
+                                     decode_level)
+
+    fmt = BLOCK_FORMATS[tex.vk_format]
+    levels = [decode_level(lv, tex.vk_format, *tex.level_size(k)) for k, lv in enumerate(tex.levels)]
+    if notes is not None:
+        notes.append(f"{tex.name}: vkFormat {tex.vk_format} ({fmt.name}) is not supported for sampling by "
+                     f"{device}: drew its levels decoded on the CPU")
+    return Texture(name=tex.name, levels=levels, sampler=tex.sampler, from_ktx2=tex.from_ktx2,
+                   vk_format=VK_FORMAT_R8G8B8A8_SRGB if fmt.srgb else VK_FORMAT_R8G8B8A8_UNORM)

@@ -100,6 +100,11 @@ def make_preview(model_json: Path | str, out_png: Path | str, view_px: int = 256
                 if tex.get("ktx2"):
                     img = read_ktx2((model.root / tex["ktx2"]).read_bytes())
                     levels = [np.asarray(lv) for lv in img.levels]
+                    if img.block_format is not None:  # BC/ETC2 blocks: decoded for the strip
+                        from assetpipe.core.ktx2 import decode_level  # noqa: PLC0415
+
+                        levels = [decode_level(lv, img.vk_format, max(1, img.width >> k), max(1, img.height >> k))
+                                  for k, lv in enumerate(levels)]
                     title += f"  {img.width}x{img.height}, {len(levels)} levels, vkFormat {img.vk_format}"
                 else:
                     with Image.open(model.root / tex["path"]) as im:

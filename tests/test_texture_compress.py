@@ -1,0 +1,382 @@
+"""Block-compressed textures (BC7/BC5/BC4, ETC2/EAC): formats per role, every level decoded
+(texture2ddecoder, independent of the etcpak encoder) and compared with the uncompressed chain
+the same step builds; the goals of issue 16; KTX2 files read by a second reader (ktx-parse);
+uploads on lavapipe."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from assetpipe.core.errors import InvalidTextureError
+from assetpipe.core.hashing import digest_bytes
+from assetpipe.core.ktx2 import BLOCK_FORMATS, block_level_shape, decode_level, read_ktx2
+from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
+                                       ROLE_OCCLUSION, ImageSource)
+from assetpipe.pipelines.texture_compress import (choose_format, compress_level, level_quality, pad_to_blocks,
+                                                  rebuild_normal_z)
+from assetpipe.pipelines.texture_mips import mip_level_count
+from assetpipe.pipelines.texture_options import TextureOptions
+from assetpipe.pipelines.texture_process import process_texture
+
+# The goals of issue 16 (benchmarks/textures.py measures them on the corpus), on level 0:
+COLOUR_DB = 36.0  # colour >= 36 dB PSNR against our uncompressed level 0
+PHOTO_LEVEL0_DB = 38.0  # photographic content
+NORMAL_DEG = 2.0  # normal maps: mean angular error <= 2 degrees
+# etcpak's ETC2 RGB/RGBA does not reach 36 dB on this content (32.7 dB measured on level 0, and
+# 25.5 dB on the corpus' UV.png; see the report of issue 16): its level 0 is held to 30 dB, a
+# regression floor, not the goal.
+ETC2_LEVEL0_DB = 30.0
+# RMS error (8-bit units) of one flat colour in the format: BC4/BC5/BC7 endpoints hold 7-8 bits
+# (BC7's mode 6 shares a p-bit, so alpha can come out 254): 1 unit; ETC2/EAC base colours hold
+# 4-5 bits per channel plus a table offset: etcpak was off by up to 7.2 units RMS (the 1x1 level
+# of the corpus' CesiumMan.jpg: 31.0 dB), 8 allowed.
+FLAT_RMS = {131: 1.0, 132: 1.0, 134: 1.0, 161: 8.0}
+
+
+def photo(h: int, w: int, seed: int = 7, alpha: bool = False) -> np.ndarray:
+    """(h, w, 4) uint8 with a photographic-like spectrum: gradients + noise at several scales."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[:h, :w].astype(np.float32)
+    y, x = y / h, x / w
+    img = np.stack([0.2 + 0.6 * x, 0.25 + 0.5 * y, 0.5 + 0.3 * np.sin(6 * x + 4 * y)], axis=-1)
+    for cells, amp in ((4, 0.2), (16, 0.08)):
+        noise = rng.standard_normal((cells, cells, 3)).astype(np.float32)
+        img += amp * cv2.resize(noise, (w, h), interpolation=cv2.INTER_CUBIC)
+    img += 0.008 * rng.standard_normal((h, w, 3)).astype(np.float32)  # texel-level grain (about 2 units)
+    out = np.full((h, w, 4), 255, np.uint8)
+    out[..., :3] = np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)
+    if alpha:
+        out[..., 3] = np.clip((0.3 + 0.7 * x) * 255, 0, 255).astype(np.uint8)
+    return out
+
+
+def normal_map(h: int, w: int, seed: int = 3) -> np.ndarray:
+    """(h, w, 4) uint8 tangent-space normals of a smooth random height field (z > 0)."""
+    rng = np.random.default_rng(seed)
+    height = cv2.resize(rng.standard_normal((6, 6)).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
+    gy, gx = np.gradient(height * 4.0)
+    n = np.stack([-gx, -gy, np.ones_like(gx)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    out = np.full((h, w, 4), 255, np.uint8)
+    out[..., :3] = np.clip(np.rint((n * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8)
+    return out
+
+
+def png_source(rgba: np.ndarray, name: str = "t.png") -> ImageSource:
+    buf = io.BytesIO()
+    Image.fromarray(rgba).save(buf, "PNG")
+    data = buf.getvalue()
+    return ImageSource(name=name, data=data, mime="image/png", origin=f"/models/{name}", digest=digest_bytes(data))
+
+
+def content(role: str, h: int, w: int, alpha: bool = False) -> np.ndarray:
+    return normal_map(h, w) if role == ROLE_NORMAL else photo(h, w, alpha=alpha)
+
+
+EXPECTED = {  # (codec, role, alpha) -> vkFormat
+    ("bc", ROLE_BASE_COLOR, False): 146, ("bc", ROLE_BASE_COLOR, True): 146, ("bc", ROLE_EMISSIVE, False): 146,
+    ("bc", ROLE_METALLIC_ROUGHNESS, False): 145, ("bc", ROLE_NORMAL, False): 141, ("bc", ROLE_OCCLUSION, False): 139,
+    ("etc2", ROLE_BASE_COLOR, False): 148, ("etc2", ROLE_BASE_COLOR, True): 152, ("etc2", ROLE_EMISSIVE, False): 148,
+    ("etc2", ROLE_METALLIC_ROUGHNESS, False): 147, ("etc2", ROLE_NORMAL, False): 155,
+    ("etc2", ROLE_OCCLUSION, False): 153,
+}
+
+
+@pytest.mark.parametrize("zstd", [False, True])
+@pytest.mark.parametrize("codec,role,alpha", sorted(EXPECTED))
+def test_every_level_decodes_close_to_the_uncompressed_chain(codec, role, alpha, zstd):
+    h, w = 72, 90  # not multiples of 4 below level 2; 7 levels down to 1x1
+    src = png_source(content(role, h, w, alpha))
+    alpha_mode = "BLEND" if alpha else "OPAQUE"
+    plain = process_texture(src, role, alpha_mode, 0.5, TextureOptions())
+    opts = TextureOptions(compression=codec, supercompression="zstd" if zstd else "none")
+    res = process_texture(src, role, alpha_mode, 0.5, opts)
+    ref = read_ktx2(plain.ktx2).levels
+    img = read_ktx2(res.ktx2, "compressed.ktx2")
+    vk = EXPECTED[(codec, role, alpha)]
+    assert img.vk_format == res.vk_format == vk
+    assert img.supercompression == (2 if zstd else 0)
+    assert img.srgb == (role in (ROLE_BASE_COLOR, ROLE_EMISSIVE)) == res.srgb
+    assert (img.width, img.height) == (w, h) and len(img.levels) == res.levels == mip_level_count(w, h) == len(ref)
+    fmt = BLOCK_FORMATS[vk]
+    for k, (blocks, lv) in enumerate(zip(img.levels, ref)):
+        lh, lw = lv.shape[:2]
+        assert blocks.shape == block_level_shape(w, h, k, fmt.block_bytes) == ((lh + 3) // 4, (lw + 3) // 4,
+                                                                            fmt.block_bytes)
+        got = decode_level(blocks, vk, lw, lh)
+        q = level_quality(lv, got, vk, role)
+        # Every level: better than one flat colour (direction) per 4x4 block, the simplest block
+        # code. Coarse levels hold a lot of content per block, so the level-0 goals do not apply
+        # to them (BC7 gives 25-35 dB on the 4x4-16x16 levels of corpus label textures).
+        check_against_flat_blocks(lv, q, vk, role, k)
+        if k == 0 and role == ROLE_NORMAL:
+            assert q <= NORMAL_DEG, f"level 0: {q:.2f} degrees"
+        elif k == 0 and fmt.model == 161 and role not in (ROLE_OCCLUSION,):  # ETC2 colour
+            assert q >= ETC2_LEVEL0_DB, f"level 0: {q:.2f} dB"
+        elif k == 0:
+            assert q >= PHOTO_LEVEL0_DB, f"level 0: {q:.2f} dB"
+
+
+def check_against_flat_blocks(level: np.ndarray, q: float, vk: int, role: str, k: int) -> None:
+    """``q`` (the quality of a decoded level) is no worse than one flat colour (direction) per
+    4x4 block, the simplest block code: catches wrong blocks, order, swizzle or level."""
+    flat = block_mean_quality(level, vk, role)
+    if role == ROLE_NORMAL:  # slack: x and y are quantised (to 8 bits in BC5), 0.5 degrees
+        assert q <= flat + 0.5, f"level {k}: {q:.2f} degrees, flat blocks {flat:.2f}"
+    else:  # RMS error: flat blocks' plus what storing a flat colour costs in the format (the
+        # triangle inequality: an encoder that stored the flat blocks would be within this)
+        rms, rms_flat = 255.0 / 10 ** (q / 20), 255.0 / 10 ** (flat / 20)
+        assert rms <= rms_flat + FLAT_RMS[BLOCK_FORMATS[vk].model], f"level {k}: {q:.2f} dB, flat blocks {flat:.2f}"
+
+
+def block_mean_quality(level: np.ndarray, vk: int, role: str) -> float:
+    """The quality of replacing every 4x4 block of ``level`` by its mean (edge blocks: their
+    texels in the level)."""
+    h, w = level.shape[:2]
+    padded = pad_to_blocks(level).astype(np.float64)
+    ph, pw = padded.shape[:2]
+    wt = np.zeros((ph, pw, 1))
+    wt[:h, :w] = 1.0
+    sums = (padded * wt).reshape(ph // 4, 4, pw // 4, 4, 4).sum(axis=(1, 3))
+    counts = wt.reshape(ph // 4, 4, pw // 4, 4, 1).sum(axis=(1, 3))
+    means = np.repeat(np.repeat(sums / counts, 4, axis=0), 4, axis=1)[:h, :w]
+    flat = np.clip(np.rint(means), 0, 255).astype(np.uint8)
+    if role == ROLE_NORMAL:  # a flat block of the mean vector, stored as x, y like the format
+        flat[..., 2] = 0
+    return level_quality(level, flat, vk, role)
+
+
+def test_decoder_is_independent_and_cropping_is_right():
+    """decode_level (texture2ddecoder, BGRA swizzled back) against etcpak's input on a tile whose
+    texels are all distinct per 4x4 block, so a wrong crop, swizzle or block order shows."""
+    import texture2ddecoder
+
+    rgba = photo(10, 13)
+    fmt = choose_format("bc", ROLE_BASE_COLOR, True, False)
+    blocks = compress_level(rgba, fmt)
+    assert blocks.shape == (3, 4, 16)
+    ours = decode_level(blocks, fmt.vk_format, 13, 10)
+    raw = np.frombuffer(texture2ddecoder.decode_bc7(blocks.tobytes(), 16, 12), np.uint8).reshape(12, 16, 4)
+    assert (ours == raw[:10, :13][..., [2, 1, 0, 3]]).all()
+    # the padding repeats the edge; the kept texels are close to the input
+    assert (pad_to_blocks(rgba)[10:, :13] == rgba[9]).all()
+    assert level_quality(rgba, ours, fmt.vk_format, ROLE_BASE_COLOR) >= block_mean_quality(rgba, fmt.vk_format,
+                                                                                         ROLE_BASE_COLOR)
+
+
+def test_normal_z_is_rebuilt_like_the_shader():
+    n = normal_map(8, 8)
+    xy_only = n.copy()
+    xy_only[..., 2] = 0
+    v = rebuild_normal_z(xy_only)
+    assert np.allclose(np.linalg.norm(v, axis=-1), 1.0, atol=1e-5) and (v[..., 2] >= 0).all()
+    stored = n[..., :3].astype(np.float32) * 2 / 255 - 1
+    stored /= np.linalg.norm(stored, axis=-1, keepdims=True)
+    # 8-bit x, y quantisation alone: 1 degree on average (near-horizontal normals lose most:
+    # z = sqrt(1 - x^2 - y^2) is steep there)
+    assert np.degrees(np.arccos(np.clip((v * stored).sum(-1), -1, 1))).mean() < 1.0
+
+
+def test_max_size_applies_before_compression():
+    src = png_source(photo(64, 128))
+    res = process_texture(src, ROLE_BASE_COLOR, options=TextureOptions(max_size=16, compression="bc"))
+    img = read_ktx2(res.ktx2)
+    assert (img.width, img.height, len(img.levels)) == (16, 8, 5)
+    assert [lv.shape[:2] for lv in img.levels] == [(2, 4), (1, 2), (1, 1), (1, 1), (1, 1)]
+    plain = read_ktx2(process_texture(src, ROLE_BASE_COLOR, options=TextureOptions(max_size=16)).ktx2).levels
+    fmt = BLOCK_FORMATS[img.vk_format]
+    # the encoder is deterministic: the blocks are exactly those of the capped uncompressed levels
+    assert all((compress_level(lv, fmt) == blocks).all() for lv, blocks in zip(plain, img.levels))
+
+
+def test_codec_and_settings_are_in_the_options_key():
+    keys = {json.dumps(TextureOptions(compression=c, supercompression=s).cache_key(), sort_keys=True)
+            for c in ("none", "bc", "etc2") for s in ("none", "zstd")}
+    assert len(keys) == 6
+    with pytest.raises(ValueError, match="texture compression must be one of none, bc, etc2"):
+        TextureOptions(compression="astc")
+    with pytest.raises(ValueError, match="supercompression must be none or zstd"):
+        TextureOptions(supercompression="lz4")
+
+
+def test_default_output_is_unchanged_rgba8():
+    src = png_source(photo(20, 30))
+    res = process_texture(src, ROLE_BASE_COLOR)
+    assert res.vk_format == 43 and read_ktx2(res.ktx2).supercompression == 0
+
+
+def test_zstd_sizes_and_corruption():
+    src = png_source(photo(64, 64))
+    raw = process_texture(src, ROLE_BASE_COLOR, options=TextureOptions(compression="bc")).ktx2
+    z = process_texture(src, ROLE_BASE_COLOR, options=TextureOptions(compression="bc", supercompression="zstd")).ktx2
+    a, b = read_ktx2(raw), read_ktx2(z)
+    assert all((x == y).all() for x, y in zip(a.levels, b.levels))
+    bad = bytearray(z)
+    bad[-20] ^= 0xFF  # inside level 0's Zstandard frame
+    with pytest.raises(InvalidTextureError, match="level 0: Zstandard data does not decode|level 0: Zstandard data decodes to"):
+        read_ktx2(bytes(bad), "bad.ktx2")
+
+
+# ----------------------------------------------------------------------------- ktx-parse
+
+def _ktx_parse() -> Path | None:
+    import os
+
+    repo = Path(__file__).resolve().parents[1]
+    for c in (os.environ.get("ASSETPIPE_KTX_PARSE"), repo / ".venv" / "node" / "node_modules" / "ktx-parse"):
+        if c and (Path(c) / "package.json").is_file():
+            return Path(c)
+    return None
+
+
+_SCRIPT = r"""
+import { read, write } from %(module)s;
+import { readFileSync } from 'fs';
+const src = new Uint8Array(readFileSync(process.argv[2]));
+const c = read(src);
+const d = c.dataFormatDescriptor[0];
+const again = write(c, { keepWriter: true });
+console.log(JSON.stringify({
+  vkFormat: c.vkFormat, typeSize: c.typeSize, w: c.pixelWidth, h: c.pixelHeight, levelCount: c.levelCount,
+  scheme: c.supercompressionScheme,
+  dfd: { colorModel: d.colorModel, transferFunction: d.transferFunction, texelBlockDimension: d.texelBlockDimension,
+         bytesPlane: d.bytesPlane, samples: d.samples },
+  levels: c.levels.map(l => ({ n: l.levelData.byteLength, u: l.uncompressedByteLength })),
+  rewrittenIdentical: again.length === src.length && again.every((v, i) => v === src[i]) }));
+"""
+
+
+@pytest.mark.parametrize("codec,role,alpha,zstd", [("bc", ROLE_BASE_COLOR, False, False), ("bc", ROLE_NORMAL, False, True),
+                                                  ("bc", ROLE_OCCLUSION, False, False),
+                                                  ("etc2", ROLE_BASE_COLOR, True, True),
+                                                  ("etc2", ROLE_NORMAL, False, False)])
+def test_ktx_parse_reads_block_formats(tmp_path, codec, role, alpha, zstd):
+    node, pkg = shutil.which("node"), _ktx_parse()
+    if node is None or pkg is None:
+        pytest.fail("needs node and ktx-parse (scripts/setup.sh: npm install --prefix .venv/node ktx-parse@2.0.0)")
+    script = tmp_path / "p.mjs"
+    script.write_text(_SCRIPT % {"module": json.dumps((pkg / "dist" / "index.mjs").as_uri())})
+    res = process_texture(png_source(content(role, 30, 45, alpha)), role, "BLEND" if alpha else "OPAQUE", 0.5,
+                          TextureOptions(compression=codec, supercompression="zstd" if zstd else "none"))
+    path = tmp_path / "t.ktx2"
+    path.write_bytes(res.ktx2)
+    out = subprocess.run([node, str(script), str(path)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout)
+    fmt = BLOCK_FORMATS[res.vk_format]
+    assert (got["vkFormat"], got["typeSize"], got["w"], got["h"]) == (res.vk_format, 1, 45, 30)
+    assert got["levelCount"] == res.levels and got["scheme"] == (2 if zstd else 0)
+    d = got["dfd"]
+    assert d["colorModel"] == fmt.model and d["transferFunction"] == (2 if fmt.srgb else 1)
+    assert d["texelBlockDimension"] == [3, 3, 0, 0]
+    assert d["bytesPlane"] == [fmt.block_bytes, 0, 0, 0, 0, 0, 0, 0]
+    assert [(s["bitOffset"], s["bitLength"], s["channelType"]) for s in d["samples"]] == \
+        [(off, fmt.sample_bits - 1, ch) for off, ch in fmt.samples]
+    assert all(s["sampleLower"] == 0 and s["sampleUpper"] == 0xFFFFFFFF for s in d["samples"])
+    for k, lv in enumerate(got["levels"]):
+        bh, bw, nb = block_level_shape(45, 30, k, fmt.block_bytes)
+        assert lv["u"] == bh * bw * nb
+        assert (lv["n"] < lv["u"] + 64) if zstd else (lv["n"] == lv["u"])
+    assert got["rewrittenIdentical"]  # same layout, padding and ordering as ktx-parse's writer
+
+
+# ----------------------------------------------------------------------------- lavapipe
+
+@pytest.mark.vulkan
+@pytest.mark.parametrize("codec", ["bc", "etc2"])
+def test_compressed_build_validates_on_lavapipe(tmp_path, codec):
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+    from assetpipe.renderer.batch import validate_model
+    from assetpipe.renderer.validate import ValidateOptions
+
+    repo = Path(__file__).resolve().parents[1]
+    opts = BuildOptions(lod=None, texture=TextureOptions(compression=codec, supercompression="zstd"))
+    report = run_build([repo / "examples" / "crate" / "crate.gltf"], tmp_path / "out", opts, jobs=1)
+    assert not report.failed
+    model = tmp_path / "out" / "crate.json"
+    side = json.loads((tmp_path / "out" / "crate.asset.json").read_text())
+    fmts = {t["vkFormat"] for m in side.get("materials", []) for t in (m.get("textures") or {}).values()}
+    assert fmts == {146 if codec == "bc" else 148}
+    r = validate_model(model, ValidateOptions(source_root=str(repo / "examples")), isolate=False)
+    failed = [c for c in r.checks if c.status == "fail"]
+    assert failed == [], [(c.name, c.messages) for c in failed]
+    texture = next(c for c in r.checks if c.name == "textures")
+    assert texture.status == "pass"
+    cpu = [n for n in r.notes if "decoded on the CPU" in n]
+    if codec == "bc":  # lavapipe samples BC formats
+        assert cpu == []
+    else:  # and not ETC2: said plainly, drawn from CPU-decoded levels
+        assert len(cpu) == 1 and "ETC2_R8G8B8_SRGB_BLOCK) is not supported for sampling by llvmpipe" in cpu[0]
+
+
+# ----------------------------------------------------------------------------- corpus
+
+def _corpus_uses(corpus: Path):
+    from assetpipe.model_import import import_model
+
+    seen = set()
+    files = sorted(list((corpus / "models").rglob("*.gltf")) + list((corpus / "models").rglob("*.glb"))
+                   + list((corpus / "models").rglob("*.obj")))
+    for f in files:
+        for mat in import_model(f).materials:
+            for role, ref in mat.textures().items():
+                alpha = mat.alpha_mode if role == ROLE_BASE_COLOR else "OPAQUE"
+                cutoff = mat.alpha_cutoff if alpha == "MASK" else 0.5
+                if (ref.image.digest, role, alpha, cutoff) not in seen:
+                    seen.add((ref.image.digest, role, alpha, cutoff))
+                    yield ref.image, role, alpha, cutoff
+
+
+@pytest.mark.corpus
+@pytest.mark.parametrize("codec", ["bc", "etc2"])
+def test_corpus_every_level_of_every_texture(corpus, codec):
+    """Every texture a corpus material uses, every level decoded against the uncompressed build.
+
+    bc: the goals on level 0 (>= 36 dB; >= 38 dB for the JPEG sources, camera and scanned
+    content), normal maps <= 2 degrees on every level. etc2: normal maps <= 2 degrees on every
+    level; colour only against flat blocks, because etcpak's ETC2 misses the 36 dB goal
+    (25.5 dB on UV.png level 0, see benchmarks/textures.py).
+    """
+    count = 0
+    for image, role, alpha, cutoff in _corpus_uses(corpus):
+        ref = read_ktx2(process_texture(image, role, alpha, cutoff).ktx2).levels
+        img = read_ktx2(process_texture(image, role, alpha, cutoff, TextureOptions(compression=codec)).ktx2)
+        assert len(img.levels) == len(ref)
+        for k, (blocks, lv) in enumerate(zip(img.levels, ref)):
+            q = level_quality(lv, decode_level(blocks, img.vk_format, lv.shape[1], lv.shape[0]), img.vk_format, role)
+            where = f"{image.name} ({role}, {alpha}) level {k}"
+            check_against_flat_blocks(lv, q, img.vk_format, role, k)
+            if role == ROLE_NORMAL:
+                assert q <= NORMAL_DEG, f"{where}: {q:.2f} degrees"
+            elif codec == "bc" and k == 0:
+                goal = PHOTO_LEVEL0_DB if image.mime == "image/jpeg" else COLOUR_DB
+                assert q >= goal, f"{where}: {q:.2f} dB"
+        count += 1
+    assert count >= 30  # 36 uses in the shared corpus today
+
+
+def test_cli_option(tmp_path):
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+
+    repo = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["build", str(repo / "examples" / "crate" / "crate.gltf"), "-o", str(out), "-q",
+                                  "--no-lod", "--texture-compression", "etc2", "--texture-zstd"])
+    assert r.exit_code == 0, r.output
+    tex = json.loads((out / "crate.asset.json").read_text())["materials"][0]["textures"]["baseColor"]
+    img = read_ktx2((out / tex["ktx2"]).read_bytes())
+    assert tex["vkFormat"] == img.vk_format == 148 and img.supercompression == 2
+    r = CliRunner().invoke(main, ["build", "x.gltf", "--texture-compression", "astc"])
+    assert r.exit_code == 2 and "'astc' is not one of 'none', 'bc', 'etc2'" in r.output
