@@ -198,8 +198,10 @@ def _protected(root: Path) -> tuple[set[str], set[str]]:
             for kin in (steps.values() if isinstance(steps, dict) else ()):
                 if isinstance(kin, dict):
                     if kin.get("step") == "import" and isinstance(kin.get("inputs"), dict):
-                        # its explanation adds the files the import discovered; its key has only the source
-                        kin = {**kin, "inputs": {"source": kin["inputs"].get("source")}}
+                        # its explanation adds the files the import discovered; its key has only the
+                        # source's digest and name (assetpipe/graph.py, the import phase)
+                        kin = {**kin, "inputs": {k: kin["inputs"][k] for k in ("source", "name")
+                                                 if k in kin["inputs"]}}
                     records.add(digest_json(kin).split(":", 1)[-1])
     return blobs, records
 

@@ -64,7 +64,7 @@ def test_collect_keeps_what_the_current_outputs_need(project):
     # an output deleted by hand is restored from the cache, no step rerun
     (project / "out" / "crate.vtx").unlink()
     restored = build(project, "--no-lod", "--max-texture-size", "8")
-    assert restored["crate"]["status"] == "cached" and "restored: crate.vtx" in restored["crate"]["reason"]
+    assert restored["crate"]["status"] == "cached" and "restored: crate.vtx" in restored["crate"]["reason"], (restored["crate"]["reason"], restored["crate"]["steps"])
     assert all(not s["ran"] for s in restored["crate"]["steps"])
     # options A's entries were collected: building with them again reruns their steps (without the
     # collection every one of them would be a cache hit), while the steps both share still hit
