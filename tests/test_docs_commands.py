@@ -106,6 +106,16 @@ def test_documented_command_works(doc, line, cmd, tmp_path):
             assert script.is_file(), f"{doc}:{line}: {tokens[1]} does not exist"
             subprocess.run([sys.executable, str(script), "--help"], check=True, capture_output=True,
                            env=_env(tmp_path), timeout=120)
+        elif tokens[:1] == ["dask"] and tokens[1:2] in (["scheduler"], ["worker"]):
+            # the farm's scheduler and workers (docs/FARM.md; tests/test_farm.py runs a real
+            # LocalCluster): the documented flags must be the installed dask CLI's
+            dask = Path(sys.executable).with_name("dask")
+            if not dask.exists():
+                pytest.skip("the farm extra is not installed (pip install 'assetpipe[farm]')")
+            help_text = subprocess.run([str(dask), tokens[1], "--help"], capture_output=True, text=True,
+                                       check=True, timeout=120).stdout
+            for opt in (t for t in tokens[2:] if t.startswith("--")):
+                assert opt in help_text, f"{doc}:{line}: 'dask {tokens[1]}' has no option {opt}"
         else:
             pytest.fail(f"{doc}:{line}: no rule checks {part!r}: add one to tests/test_docs_commands.py")
 

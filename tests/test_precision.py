@@ -110,22 +110,25 @@ def test_warning_threshold_is_the_documented_fraction():
 
 def test_a_model_that_loses_every_triangle_fails_and_its_neighbour_builds(tmp_path):
     pos, tris, _ = uv_sphere(12, 6)
-    far = np.vstack([pos, [[3e38, 0.0, 0.0]]])  # a valid float32: every triangle is a speck beside it
+    # 1e17 is within the import's coordinate budget (1e18) and a valid float32: every
+    # triangle of the unit sphere is a speck beside it
+    far = np.vstack([pos, [[1e17, 0.0, 0.0]]])
     tris_far = np.vstack([tris, [[0, 1, far.shape[0] - 1]]])
     write_obj(tmp_path / "lost.obj", far, tris_far)
     write_obj(tmp_path / "good.obj", pos, tris)
-    # one vertex beyond float32's range: its triangle is dropped with a warning, the rest builds
+    # one vertex beyond float32's range: over the import's coordinate budget, the file is
+    # refused in one line naming the vertex (pipelines/budgets.py); the others build
     over = np.vstack([pos, [[1e39, 0.0, 0.0]]])
     write_obj(tmp_path / "over.obj", over, np.vstack([tris, [[0, 1, over.shape[0] - 1]]]))
     report = run_build([tmp_path], tmp_path / "out", NO_LOD, cache_dir=tmp_path / "c")
     by_id = {r.id: r for r in report.results}
-    assert by_id["good"].status == "built" and by_id["over"].status == "built"
-    assert by_id["lost"].status == "failed"
+    assert by_id["good"].status == "built"
+    assert by_id["lost"].status == "failed" and by_id["over"].status == "failed"
     err = by_id["lost"].error
     assert "\n" not in err and str(tmp_path / "lost.obj") in err and "degenerate" in err
     assert not (tmp_path / "out" / "lost.json").exists()
-    assert by_id["over"].stats["degenerateTriangles"] == 1
-    assert any("beyond float32's range" in w for w in by_id["over"].warnings)
+    err = by_id["over"].error
+    assert "\n" not in err and str(tmp_path / "over.obj") in err and f"vertex {over.shape[0]} " in err, err
 
 
 # -- duplicates ---------------------------------------------------------------------------
@@ -151,7 +154,21 @@ def test_duplicates_counted_in_the_sidecar(tmp_path):
     write_obj(tmp_path / "d.obj", pos, tris)
     report = run_build([tmp_path / "d.obj"], tmp_path / "out", NO_LOD, cache_dir=tmp_path / "c")
     assert not report.failed
+    # the OBJ importer drops the 55 exact repeats (with a warning); the 20 reversed twins are
+    # kept (an OBJ material is single-sided: they are back faces)
+    (r,) = report.results
+    assert any("55 repeated triangle face(s) ignored" in w for w in r.warnings), r.warnings
     stats = _sidecar(tmp_path / "out", "d")["stats"]
+    assert stats["duplicateTriangles"] == 0 and stats["triangles"] == n + 20
+    # the same triangles in a glTF reach the mesh step, which drops and counts them
+    from gltf_builder import GltfBuilder
+
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(pos.astype(np.float32), indices=tris.astype(np.uint32)))
+    b.write_gltf(tmp_path / "g.gltf")
+    report = run_build([tmp_path / "g.gltf"], tmp_path / "out2", NO_LOD, cache_dir=tmp_path / "c")
+    assert not report.failed
+    stats = _sidecar(tmp_path / "out2", "g")["stats"]
     assert stats["duplicateTriangles"] == 55 and stats["triangles"] == n + 20
 
 
