@@ -117,8 +117,9 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
         lods = []
         for li, lod in enumerate(m.lods):
             off, size = lod_ranges[mi][li]
-            err = {k: _num(v) for k, v in lod.error.items()} if lod.error else {
-                "simplifier": 0.0, "hausdorff": 0.0, "rms": 0.0, "hausdorffRel": 0.0, "rmsRel": 0.0}
+            err = {k: (v if isinstance(v, bool) else _num(v)) for k, v in lod.error.items()} if lod.error else {
+                "simplifier": 0.0, "hausdorff": 0.0, "rms": 0.0, "hausdorffRel": 0.0, "rmsRel": 0.0,
+                "hausdorffLowerRel": 0.0, "boundConverged": True}
             entry = {"level": li, "idxOffset": off, "idxSize": size,
                      "triangles": int(lod.indices.shape[0]), "vertexCount": int(lod.vertex_count),
                      "error": err, "switchDistance": _num(lod.switch_distance)}

@@ -287,7 +287,8 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
             offset += vk.shape[0]
             all_verts.append(vk)
             levels_meta.append({"error": {"simplifier": None, "hausdorff": e.hausdorff, "rms": e.rms,
-                                          "hausdorffRel": e.hausdorff_rel, "rmsRel": e.rms_rel},
+                                          "hausdorffRel": e.hausdorff_rel, "rmsRel": e.rms_rel,
+                                          "hausdorffLowerRel": e.hausdorff_lower_rel, "boundConverged": e.converged},
                                 "switchDistance": running * ppu, "vertexCount": int(offset), "handmade": True})
         out_arrays[f"{i}.vertices"] = np.vstack(all_verts)
         out_meta.append({**m, "lods": levels_meta})

@@ -182,6 +182,8 @@ def _scaled_levels(levels: Sequence[LodLevel], sigma: float, resid: float, diag:
         scale = diag if diag > 0 else math.nan
         out.append(dataclasses.replace(
             lv, indices=idx, hausdorff=h, rms=rms, hausdorff_rel=h / scale, rms_rel=rms / scale,
+            # the copy's own distance is not measured: 0 is the lower value that always holds
+            hausdorff_lower_rel=lv.hausdorff_lower_rel if (sigma == 1.0 and resid == 0.0) else 0.0,
             switch_distance=running * ppu if math.isfinite(h) else lv.switch_distance))
     return tuple(out)
 

@@ -56,7 +56,10 @@ class LodOptions:
     error_samples, error_seed: area-weighted samples per side for the error measurement, at
       most; a mesh of M triangles gets ``max(error_samples_min, error_samples_per_triangle * M)``
       capped at ``error_samples`` (besides every vertex), so small meshes are not measured
-      with 50,000 samples each (a CAD model of 115 small meshes took 125 s that way).
+      with 50,000 samples each (a CAD model of 115 small meshes took 125 s that way). The
+      samples make the RMS *estimate* and raise the bound's lower value early; the Hausdorff
+      bound does not depend on them (2CylinderEngine, bunny, CesiumMan, spider: the same
+      bounds with 10,000 and 50,000 samples, 18% less measuring time).
     measure: False skips the measurement (errors and switch distances are NaN then): for
       timing and previews only, never for output.
     target_screen_sizes: instead of ratios, the on-screen size (pixels spanned by the
@@ -95,7 +98,7 @@ class LodOptions:
     weld_normal_seams: bool = True
     resolution_px: int = 1080
     fov_y_deg: float = 60.0
-    error_samples: int = 50_000
+    error_samples: int = 16_384
     error_seed: int = 0
     error_samples_min: int = 2048
     error_samples_per_triangle: float = 4.0

@@ -157,7 +157,7 @@ def test_sidecar_mesh_and_lod_records():
     assert (m0["id"], m0["name"], m0["materialId"], m0["vertexCount"], m0["triangleCount"]) == (
         "mesh-0-0", "MESH-0-0", "M-mat-0", 4, 4)
     assert m0["lods"][0]["error"] == {"simplifier": 0.0, "hausdorff": 0.0, "rms": 0.0, "hausdorffRel": 0.0,
-                                      "rmsRel": 0.0}
+                                      "rmsRel": 0.0, "hausdorffLowerRel": 0.0, "boundConverged": True}
     assert m0["lods"][0]["switchDistance"] == 0.0 and m0["lods"][2]["switchDistance"] == 20.0
     assert m0["lods"][1]["error"]["hausdorff"] == 0.1 and m0["lods"][1]["vertexCount"] == 4
     assert side["stats"] == {"degenerateTriangles": 3, "weldedVertices": 7}

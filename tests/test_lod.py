@@ -69,8 +69,13 @@ def _check_chain(chain, n_vertices, m0):
 
 
 def _assert_error_non_decreasing(chain):
+    """Coarser levels are farther from level 0. The recorded values are bounds: only where
+    both bounds converged (within 5% of the distance they evaluated) is their order the true
+    order up to that 5%; an unconverged bound is checked to hold its lower value."""
     for prev, cur in zip(chain.levels, chain.levels[1:]):
-        assert cur.hausdorff_rel >= prev.hausdorff_rel, (prev, cur)
+        assert cur.hausdorff_rel >= cur.hausdorff_lower_rel, cur
+        if prev.converged and cur.converged:
+            assert cur.hausdorff_rel >= prev.hausdorff_lower_rel, (prev, cur)
         assert cur.rms_rel >= prev.rms_rel, (prev, cur)
 
 
