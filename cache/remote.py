@@ -39,7 +39,7 @@ from pathlib import Path
 
 from assetpipe.core.errors import CacheError
 from assetpipe.core.hashing import canonical_json, digest_bytes
-from assetpipe.cache.store import Store, _split, default_cache_dir
+from assetpipe.cache.store import Store, _split, default_cache_dir, unwrap_record
 
 log = logging.getLogger("assetpipe.cache")
 
@@ -282,13 +282,8 @@ class TieredStore:
         """The record in ``raw`` if its checksum holds; a corrupt one is reported and deleted."""
         if raw is None:
             return None
-        try:
-            wrapper = json.loads(raw)
-            record = wrapper["record"]
-            ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
-        except (ValueError, KeyError, TypeError):
-            ok = False
-        if not ok:
+        record = unwrap_record(raw)
+        if record is None:
             self.local.dropped.append(f"remote {self.url}/actions/{key}: record is corrupt; rebuilt")
             self._remove(path)
             return None

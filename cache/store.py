@@ -114,6 +114,18 @@ def _hardlink(src: Path, dst: Path) -> bool:
         return False
 
 
+def unwrap_record(raw: bytes) -> dict | None:
+    """The record stored in ``raw`` (``{"record": ..., "check": digest}``), or None when it does
+    not parse or its checksum does not hold. Shared by the local store and the remote tier."""
+    try:
+        wrapper = json.loads(raw)
+        record = wrapper["record"]
+        ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
+    except (ValueError, KeyError, TypeError):
+        return None
+    return record if ok else None
+
+
 def _split(digest: str) -> tuple[str, str]:
     hexpart = digest[len(PREFIX):] if digest.startswith(PREFIX) else digest
     if len(hexpart) < 8 or any(c not in "0123456789abcdef" for c in hexpart):
@@ -248,13 +260,8 @@ class Store:
         raw = self._read(path)
         if raw is None:
             return None
-        try:
-            wrapper = json.loads(raw)
-            record = wrapper["record"]
-            ok = isinstance(record, dict) and wrapper["check"] == digest_bytes(canonical_json(record))
-        except (ValueError, KeyError, TypeError):
-            ok = False
-        if not ok:
+        record = unwrap_record(raw)
+        if record is None:
             self._drop(path, "record is corrupt")
             return None
         for d in record.get("blobs", {}).values():

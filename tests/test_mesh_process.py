@@ -20,27 +20,9 @@ def _mesh(pos, tris, **kw) -> MeshData:
 
 def _uv_sphere(n_lon: int = 48, n_lat: int = 24, r: float = 2.0):
     """A UV sphere with a UV seam (duplicated vertices at lon 0 / 360) and single pole vertices."""
-    pos, uv = [], []
-    for j in range(1, n_lat):  # rings, excluding the poles
-        th = np.pi * j / n_lat
-        for i in range(n_lon + 1):  # n_lon + 1: the seam column is duplicated
-            ph = 2 * np.pi * (i % n_lon) / n_lon
-            pos.append([r * np.sin(th) * np.cos(ph), r * np.sin(th) * np.sin(ph), r * np.cos(th)])
-            uv.append([i / n_lon, j / n_lat])
-    top, bottom = len(pos), len(pos) + 1
-    pos += [[0, 0, r], [0, 0, -r]]
-    uv += [[0.5, 0.0], [0.5, 1.0]]
-    w = n_lon + 1
-    tris = []
-    for j in range(n_lat - 2):
-        for i in range(n_lon):
-            a, b, c, d = j * w + i, j * w + i + 1, (j + 1) * w + i, (j + 1) * w + i + 1
-            tris += [[a, c, b], [b, c, d]]  # counter-clockwise seen from outside
-    for i in range(n_lon):
-        tris.append([top, i, i + 1])
-        last = (n_lat - 2) * w
-        tris.append([bottom, last + i + 1, last + i])
-    return np.array(pos, np.float64), np.array(tris, np.uint32), np.array(uv, np.float32)
+    from robust_models import uv_sphere
+
+    return uv_sphere(n_lon, n_lat, r)
 
 
 def _tri_set(vertices: np.ndarray, tris: np.ndarray) -> set:
