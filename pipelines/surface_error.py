@@ -9,9 +9,12 @@ Method (deterministic)
    (``ValueError``): the caller filters them before.
 2. Closest points come from fcpw's BVH (``find_closest_points``, float32 SIMD traversal). Its
    float32 distance is not trusted: for every query the distance to the triangle it returned
-   is recomputed exactly in float64 (:func:`closest_point_on_triangles`). That value is the
-   distance to *a* triangle of the mesh, hence never below the true distance: every number
-   the bound is built from is an upper value.
+   is recomputed exactly in float64 (:func:`pipelines.distance_kernels.tri_distance`). That
+   value is the distance to *a* triangle of the mesh, hence never below the true distance:
+   every number the bound is built from is an upper value. The bound's inner arithmetic
+   (distances to given triangles, the Lipschitz, convexity and pair bounds below) runs in
+   compiled kernels (:mod:`pipelines.distance_kernels`); :func:`closest_point_on_triangles`
+   stays here in numpy as the independent reference the tests hold them to.
 3. One direction, A -> B (reference -> level: what was lost; level -> reference: what was
    added), is bounded by branch and bound over A's triangles. ``d_B`` (distance to B) is
    1-Lipschitz, so on a triangle T with corner values ``d_i``
@@ -46,6 +49,9 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+
+from assetpipe.pipelines.distance_kernels import (
+    convex_bound, lipschitz_bound, pair_bound, tri_distance)
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -208,85 +214,6 @@ def _closest_on_segment(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarr
     return s + np.clip(t, 0.0, 1.0)[:, None] * d
 
 
-def _seg_dist2(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarray:
-    d = e - s
-    w = p - s
-    dd = np.einsum("ij,ij->i", d, d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.clip(np.einsum("ij,ij->i", w, d) / dd, 0.0, 1.0)
-    t = np.where(dd > 0, t, 0.0)
-    r = w - t[:, None] * d
-    return np.einsum("ij,ij->i", r, r)
-
-
-def _tri_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Exact float64 distance from p to triangle (a, b, c), elementwise: (K,).
-
-    The distance to the plane where p projects inside the triangle, else the nearest of the
-    three edges (also right for degenerate triangles, which are never "inside")."""
-    if p.shape[0] == 0:
-        return np.zeros(0)
-    ab, ac, ap = b - a, c - a, p - a
-    d00 = np.einsum("ij,ij->i", ab, ab)
-    d01 = np.einsum("ij,ij->i", ab, ac)
-    d11 = np.einsum("ij,ij->i", ac, ac)
-    d20 = np.einsum("ij,ij->i", ap, ab)
-    d21 = np.einsum("ij,ij->i", ap, ac)
-    det = d00 * d11 - d01 * d01
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = (d11 * d20 - d01 * d21) / det
-        w = (d00 * d21 - d01 * d20) / det
-        # (nearly) degenerate: edges only. Never below the true distance (the edges are part
-        # of the triangle), above it by at most the sliver's width (sin^2 of its angle < 1e-12)
-        inside = (det > 1e-12 * d00 * d11) & (v >= 0) & (w >= 0) & (v + w <= 1)
-    out = np.empty(p.shape[0])
-    if inside.any():
-        q = ap[inside] - v[inside, None] * ab[inside] - w[inside, None] * ac[inside]
-        out[inside] = np.einsum("ij,ij->i", q, q)
-    o = ~inside
-    if o.any():
-        po, ao, bo, co = p[o], a[o], b[o], c[o]
-        out[o] = np.minimum(np.minimum(_seg_dist2(po, ao, bo), _seg_dist2(po, bo, co)), _seg_dist2(po, co, ao))
-    return np.sqrt(out)
-
-
-def covering_radius(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Covering radius of a triangle's corners: ``max over p in T of min_i |p - v_i|``.
-
-    Args: corners (K, 3) float64. Returns (K,) float64, exact up to rounding (a relative
-    1e-12 is added so that rounding never makes it smaller). Non-obtuse triangle: the
-    circumradius (the circumcentre lies in T). Obtuse at C (``c`` the longest side AB): the
-    farthest point is where the perpendicular bisector of CA or CB meets AB, at
-    ``|CA| / (2 cos A)`` resp. ``|CB| / (2 cos B)``. Degenerate (collinear) triangles fall in
-    the obtuse case and give half the largest gap along the segment.
-    """
-    la2 = np.einsum("ij,ij->i", b - c, b - c)  # |BC|^2, opposite A
-    lb2 = np.einsum("ij,ij->i", c - a, c - a)  # |CA|^2, opposite B
-    lc2 = np.einsum("ij,ij->i", a - b, a - b)  # |AB|^2, opposite C
-    sq = np.stack([la2, lb2, lc2], 1)
-    k = np.argmax(sq, axis=1)  # the longest side, opposite the largest angle
-    rows = np.arange(sq.shape[0])
-    L2 = sq[rows, k]                  # longest side^2
-    s1 = sq[rows, (k + 1) % 3]        # the other two sides^2
-    s2 = sq[rows, (k + 2) % 3]
-    L, l1, l2 = np.sqrt(L2), np.sqrt(s1), np.sqrt(s2)
-    obtuse = L2 >= s1 + s2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # side l1 meets the longest side at an angle with cos = (l1^2 + L^2 - l2^2) / (2 l1 L):
-        # the bisector of l1 meets the longest side at l1 / (2 cos) = l1^2 L / (l1^2 + L^2 - l2^2)
-        den1 = s1 + L2 - s2
-        den2 = s2 + L2 - s1
-        r1 = np.where(s1 > 0, s1 * L / den1, 0.0)
-        r2 = np.where(s2 > 0, s2 * L / den2, 0.0)
-        r_obt = np.maximum(r1, r2)
-        cross = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-        r_acute = L * l1 * l2 / (2.0 * cross)  # abc / (4 area)
-    r = np.where(obtuse, r_obt, r_acute)
-    # rounding that leaves no usable value: every point of T is within L of every corner
-    r = np.where(np.isfinite(r) & (r >= 0), np.minimum(r, L), L)
-    return r * (1.0 + 1e-12)
-
-
 # ----------------------------------------------------------------------------- the engine
 
 
@@ -297,9 +224,9 @@ class _Engine:
         import fcpw
 
         self._fcpw = fcpw
-        self.a = positions[tri[:, 0]]
-        self.b = positions[tri[:, 1]]
-        self.c = positions[tri[:, 2]]
+        self.a = np.ascontiguousarray(positions[tri[:, 0]], dtype=np.float64)
+        self.b = np.ascontiguousarray(positions[tri[:, 1]], dtype=np.float64)
+        self.c = np.ascontiguousarray(positions[tri[:, 2]], dtype=np.float64)
         scene = fcpw.scene_3D()
         scene.set_object_count(1)
         scene.set_object_vertices(np.asfortranarray(positions, dtype=np.float32), 0)
@@ -333,11 +260,12 @@ class _Engine:
         if miss.any():
             faces[miss] = self._faces(np.asfortranarray(pts32[miss]),
                                       np.full(int(miss.sum()), np.inf, dtype=np.float32))
-        return _tri_distance(points, self.a[faces], self.b[faces], self.c[faces]), faces
+        return self.distance_to(points, faces), faces
 
     def distance_to(self, points: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Exact distance from each point to the given triangle (not the nearest)."""
-        return _tri_distance(points, self.a[faces], self.b[faces], self.c[faces])
+        return tri_distance(np.ascontiguousarray(points, dtype=np.float64),
+                            np.ascontiguousarray(faces, dtype=np.int64), self.a, self.b, self.c)
 
 
 # ----------------------------------------------------------------------------- the bound
@@ -376,82 +304,6 @@ class _Direction:
     queries: int = 0
 
 
-def _lipschitz_bound(v: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Upper bound of a 1-Lipschitz function on triangles v (K, 3, 3) with corner values d."""
-    a, b, c = v[:, 0], v[:, 1], v[:, 2]
-    ub = d.max(axis=1) + covering_radius(a, b, c)
-    e = np.stack([np.linalg.norm(b - c, axis=1), np.linalg.norm(c - a, axis=1),
-                  np.linalg.norm(a - b, axis=1)], 1)  # opposite a, b, c
-    # from corner i the farthest point of T is a corner: d_i + max_j |v_j - v_i|
-    far = np.stack([np.maximum(e[:, 1], e[:, 2]), np.maximum(e[:, 0], e[:, 2]),
-                    np.maximum(e[:, 0], e[:, 1])], 1)
-    return np.minimum(ub, (d + far).min(axis=1) * (1.0 + 1e-12))
-
-
-def _pair_bound(v: np.ndarray, f1: np.ndarray, f2: np.ndarray, target: "_Side") -> np.ndarray:
-    """Upper bound of the distance to target over cells v (K, 3, 3), from two target triangles
-    f1, f2 (K,): the cell is cut by a plane; on f1's side ``d <= d_f1``, on the other
-    ``d <= d_f2``, both convex, so each side's maximum is at its polygon's corners (the cell's
-    corners on that side and the cut points on its edges). Valid for any plane. Triangles
-    sharing an edge (also across a seam of split vertices) are cut by the plane through it
-    halfway between their walls: exact across a flat or gently folded edge. Others (two
-    sheets of a thin part) by the mid-plane of their points nearest to the cell's centroid."""
-    k = v.shape[0]
-    out = np.full(k, np.inf)
-    keep = f1 != f2
-    if not keep.any():
-        return out
-    idx = np.flatnonzero(keep)
-    fa, fb, vv = f1[idx], f2[idx], v[idx]
-    n = idx.shape[0]
-    P, wtri = target.welded
-    t1, t2 = wtri[fa], wtri[fb]
-    in2 = (t1[:, :, None] == t2[:, None, :]).any(axis=2)  # which of f1's corners f2 has too
-    edge = in2.sum(axis=1) == 2
-    origin = np.empty((n, 3))
-    m = np.empty((n, 3))
-    if edge.any():
-        r = np.flatnonzero(edge)
-        u1, u2, i2 = t1[r], t2[r], in2[r]
-        order = np.argsort(~i2, axis=1, kind="stable")  # the two shared corners first
-        rr = np.arange(r.shape[0])
-        e0, e1, o1 = P[u1[rr, order[:, 0]]], P[u1[rr, order[:, 1]]], P[u1[rr, order[:, 2]]]
-        o2 = P[u2[rr, np.argmin((u2[:, :, None] == u1[:, None, :]).any(axis=2), axis=1)]]
-        ed = e1 - e0
-        ed = ed / np.maximum(np.linalg.norm(ed, axis=1, keepdims=True), 1e-300)
-
-        def wall(o):  # unit in-plane normal of the edge, pointing into the triangle (e0, e1, o)
-            w = (o - e0) - np.einsum("ij,ij->i", o - e0, ed)[:, None] * ed
-            return w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-300)
-        origin[r], m[r] = e0, wall(o1) - wall(o2)
-    if (~edge).any():
-        r = np.flatnonzero(~edge)
-        c = vv[r].mean(axis=1)
-        eng = target.engine
-        q1 = closest_point_on_triangles(c, eng.a[fa[r]], eng.b[fa[r]], eng.c[fa[r]])
-        q2 = closest_point_on_triangles(c, eng.a[fb[r]], eng.b[fb[r]], eng.c[fb[r]])
-        origin[r], m[r] = 0.5 * (q1 + q2), q1 - q2
-    s = np.einsum("kij,kj->ki", vv - origin[:, None], m)  # (n, 3) signed, >= 0: f1's side
-    side1 = s >= 0
-    pts = vv.reshape(-1, 3)
-    d1 = target.engine.distance_to(pts, np.repeat(fa, 3)).reshape(-1, 3)
-    d2 = target.engine.distance_to(pts, np.repeat(fb, 3)).reshape(-1, 3)
-    best = np.where(side1, d1, d2).max(axis=1)
-    nxt = np.array([1, 2, 0])
-    sj = s[:, nxt]
-    cut = side1 != side1[:, nxt]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(cut, s / (s - sj), 0.0)
-    x = vv + np.clip(t, 0.0, 1.0)[:, :, None] * (vv[:, nxt] - vv)
-    x = x.reshape(-1, 3)
-    c1 = target.engine.distance_to(x, np.repeat(fa, 3)).reshape(-1, 3)
-    c2 = target.engine.distance_to(x, np.repeat(fb, 3)).reshape(-1, 3)
-    best = np.maximum(best, np.where(cut, np.maximum(c1, c2), 0.0).max(axis=1))
-    good = np.isfinite(best) & np.all(np.isfinite(m), axis=1) & np.any(m != 0, axis=1)
-    out[idx] = np.where(good, best * (1.0 + 1e-12), np.inf)
-    return out
-
-
 def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
                      own: float, lower: float, tolerance: float, budget: int) -> _Direction:
     """Upper bound of ``max over the triangles v of distance to target``.
@@ -467,7 +319,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
     hint = f[:, 0].copy()  # best candidate triangle so far, inherited by children
     while v.shape[0]:
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
-        ub = _lipschitz_bound(v, d)
+        ub = lipschitz_bound(v, d)
         keep = ub > thr
         if not keep.all():
             settled = max(settled, float(ub[~keep].max()))
@@ -487,30 +339,19 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         lower = max(lower, out.lower)
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         # convexity: d_target <= d_F for any target triangle F, and d_F is convex on T
-        # (every distinct candidate of every cell, in one batch)
-        cand = np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1)  # (K, 5)
-        new = np.ones_like(cand, dtype=bool)
-        for j in range(1, 5):
-            new[:, j] = np.all(cand[:, :j] != cand[:, j:j + 1], axis=1)
-        rows, cols = np.nonzero(new)
-        dist = target.engine.distance_to(v[rows].reshape(-1, 3), np.repeat(cand[rows, cols], 3))
-        val = np.full((k, 5), np.inf)
-        val[rows, cols] = dist.reshape(-1, 3).max(axis=1) * (1.0 + 1e-12)
-        best = val.argmin(axis=1)
-        ub = np.minimum(ub, val[np.arange(k), best])
-        hint = cand[np.arange(k), best]
+        eng = target.engine
+        cand = np.ascontiguousarray(np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 5)
+        val, hint = convex_bound(v, cand, eng.a, eng.b, eng.c)
+        ub = np.minimum(ub, val)
         keep = ub > thr
         if not keep.all():
             settled = max(settled, float(ub[~keep].max()))
             v, d, f, hint, ub, fc = v[keep], d[keep], f[keep], hint[keep], ub[keep], fc[keep]
         # a cell straddling the edge between two target triangles: cut it along the plane
-        # between them and bound each side by its own triangle (all pairs in one batch)
+        # between them and bound each side by its own triangle
         if v.shape[0]:
-            others = np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1)
-            rows, cols = np.nonzero(others != hint[:, None])
-            if rows.size:
-                pb = _pair_bound(v[rows], hint[rows], others[rows, cols], target)
-                np.minimum.at(ub, rows, pb)
+            others = np.ascontiguousarray(np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1))
+            ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded[1]))
             keep = ub > thr
             if not keep.all():
                 settled = max(settled, float(ub[~keep].max()))

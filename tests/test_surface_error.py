@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from assetpipe.pipelines.surface_error import (
-    DEFAULT_TOLERANCE, closest_point_on_triangles, covering_radius, local_frame, measure_error,
+    DEFAULT_TOLERANCE, closest_point_on_triangles, local_frame, measure_error,
     measure_levels, points_to_mesh_distance, prepare_reference, sample_surface)
 
 
@@ -237,31 +237,6 @@ def test_non_finite_positions_are_refused():
         measure_error(pos, tri, bad, tri)
 
 
-def test_covering_radius_is_exact():
-    rng = np.random.default_rng(7)
-    a, b, c = rng.normal(size=(3, 120, 3))
-    c[:20] = a[:20] + 0.3 * (b[:20] - a[:20])  # collinear
-    c[20:25] = a[20:25]                         # a repeated corner
-    r = covering_radius(a, b, c)
-    # brute force: max over a dense barycentric grid of the distance to the nearest corner
-    t = np.linspace(0, 1, 121)
-    u, v = np.meshgrid(t, t)
-    keep = u + v <= 1
-    u, v = u[keep], v[keep]
-    pts = a[:, None] + u[None, :, None] * (b - a)[:, None] + v[None, :, None] * (c - a)[:, None]
-    near = np.min(np.stack([np.linalg.norm(pts - x[:, None], axis=2) for x in (a, b, c)]), axis=0)
-    brute = near.max(axis=1)
-    assert np.all(r >= brute * (1 - 1e-12))
-    # the grid misses the exact maximiser by at most one grid step's worth
-    step = np.max(np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - a, axis=1)]), axis=0) / 120
-    assert np.all(r <= brute + 1.5 * step)
-    # known values: equilateral (circumradius s / sqrt 3), right triangle (half the hypotenuse)
-    eq = covering_radius(np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]]), np.array([[0.5, np.sqrt(3) / 2, 0]]))
-    assert eq[0] == pytest.approx(1 / np.sqrt(3), rel=1e-9)
-    rt = covering_radius(np.array([[0.0, 0, 0]]), np.array([[3.0, 0, 0]]), np.array([[0.0, 4, 0]]))
-    assert rt[0] == pytest.approx(2.5, rel=1e-9)
-
-
 # ----------------------------------------------------------------------------- the corpus
 
 
@@ -285,19 +260,3 @@ def test_bound_against_3m_samples_on_corpus_levels(corpus, model):
         dense = _dense(pos, tri, pos, level, 3_000_000)
         assert e.hausdorff >= dense, (model, ratio)
         assert e.hausdorff <= 1.25 * dense, (model, ratio, e.hausdorff / dense)
-
-
-def test_triangle_distance_matches_closest_point():
-    from assetpipe.pipelines.surface_error import _closest_on_segment, _tri_distance
-
-    rng = np.random.default_rng(9)
-    a, b, c = rng.normal(size=(3, 3000, 3))
-    c[:300] = a[:300] + 0.4 * (b[:300] - a[:300])  # collinear
-    b[300:400] = a[300:400]                        # segment
-    b[400:450] = c[400:450] = a[400:450]           # point
-    p = rng.normal(size=(3000, 3)) * 2
-    ref = np.linalg.norm(closest_point_on_triangles(p, a, b, c) - p, axis=1)
-    # degenerate rows: the exact answer is the nearest of the three segments
-    seg = np.min([np.linalg.norm(_closest_on_segment(p, s, e) - p, axis=1) for s, e in ((a, b), (b, c), (c, a))], axis=0)
-    ref[:450] = seg[:450]
-    np.testing.assert_allclose(_tri_distance(p, a, b, c), ref, rtol=1e-9, atol=1e-12)
