@@ -327,7 +327,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         if not v.shape[0]:
             break
         k = v.shape[0]
-        if out.queries + 4 * k > budget:
+        if out.queries + k > budget:  # the centroids' queries (the midpoints' are checked below)
             settled = max(settled, float(ub.max()))
             out.converged = False
             break
@@ -365,9 +365,21 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         half = np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
                          np.linalg.norm(a - c, axis=1)], 1) * 0.5
         rad = np.minimum(np.minimum(d, np.roll(d, -1, axis=1)) + half, ub[:, None])
-        dm, fm = target.engine.query(mids.reshape(-1, 3), rad.reshape(-1))
-        out.queries += 3 * k
-        dm, fm = dm.reshape(k, 3), fm.reshape(k, 3)
+        # an edge shared by two live cells has one midpoint (bit-identical: (a + b) / 2 is
+        # symmetric): ask it once, with the smaller of the two radii (both are upper values)
+        flat = np.ascontiguousarray(mids.reshape(-1, 3))
+        uniq, inv = np.unique(flat.view(np.dtype((np.void, 24))).reshape(-1), return_inverse=True)
+        inv = inv.reshape(-1)
+        urad = np.full(uniq.shape[0], np.inf)
+        np.minimum.at(urad, inv, rad.reshape(-1))
+        if out.queries + uniq.shape[0] > budget:
+            settled = max(settled, float(ub.max()))
+            out.converged = False
+            v = v[:0]
+            break
+        du, fu = target.engine.query(uniq.view(np.float64).reshape(-1, 3), urad)
+        out.queries += uniq.shape[0]
+        dm, fm = du[inv].reshape(k, 3), fu[inv].reshape(k, 3)
         out.lower = max(out.lower, float(dm.max()))
         lower = max(lower, out.lower)
         mab, mbc, mca = mids[:, 0], mids[:, 1], mids[:, 2]
