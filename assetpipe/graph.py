@@ -189,20 +189,27 @@ class Graph:
                 "libs": self.libs}
 
     def _run_phase(self, jobs: list[tuple[list[AssetState], str, dict, tuple]], accept=None,
-                   with_record=None) -> dict[str, dict | None]:
+                   with_record=None, costs: list[float] | None = None) -> dict[str, dict | None]:
         """jobs: (assets, step label, key inputs, task call). Looks each key up, runs the
         missing ones (each key once), stores records. Returns key -> record (None: failed).
 
         ``accept(call, record)``: whether a cached record is still valid (the import step's
         discovered dependencies); ``with_record(key_inputs, record)``: the key inputs to
-        remember for explanations once the record is known."""
+        remember for explanations once the record is known.
+
+        ``costs`` (one per job): an estimate of each task's work; the tasks to run are handed to
+        the executor largest first, so that a long task does not start last and hold up the
+        phase on one worker (results and records do not depend on the order)."""
         results: dict[str, dict | None] = {}
         to_run: dict[str, tuple] = {}
         owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
         if hasattr(self.store, "prefetch"):  # a remote cache tier: fetch the phase's hits in one batch
             self.store.prefetch([digest_json(kin) for _, _, kin, _ in jobs])
-        for assets, label, kin, call in jobs:
+        cost_of: dict[str, float] = {}
+        for j, (assets, label, kin, call) in enumerate(jobs):
             key = digest_json(kin)
+            if costs is not None:
+                cost_of[key] = max(cost_of.get(key, 0.0), costs[j])
             for a in assets:
                 owners.setdefault(key, []).append((a, label, kin))
             if key in results or key in to_run:
@@ -215,6 +222,8 @@ class Graph:
                 to_run[key] = call
                 self.store.misses += 1
         keys = list(to_run)
+        if costs is not None:
+            keys.sort(key=lambda k: -cost_of.get(k, 0.0))  # stable: ties keep the asset order
         for key, (status, value, secs) in zip(keys, self.executor.map([to_run[k] for k in keys])):
             for a, _, _ in owners[key]:
                 a.seconds += secs
@@ -418,7 +427,10 @@ class Graph:
                      for m in imp["meshMaterials"]]
             kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout, "doubleSided": sided})
             jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, layout, lod_opts, sided)))
-        self._run_phase(jobs)
+        # the LOD work grows with the triangles (measuring each level dominates it)
+        costs = [float((a.records.get("mesh") or {}).get("meta", {}).get("triangles", 0))
+                 for assets, _, _, _ in jobs for a in assets[:1]]
+        self._run_phase(jobs, costs=costs)
 
     def _kept_levels(self, a: AssetState) -> list[list[int]] | None:
         """Per mesh, the chain levels a scene can select (None: all of them)."""
