@@ -45,6 +45,7 @@ meshes are 0 apart. Degenerate triangles are fine (they count as segments or poi
 from __future__ import annotations
 
 import math
+from operator import attrgetter
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -53,6 +54,7 @@ import numpy as np
 from assetpipe.pipelines.distance_kernels import (
     convex_bound, lipschitz_bound, pair_bound, tri_distance)
 
+_PRIMITIVE = attrgetter("primitive_index")
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
 # The bound stops refining a direction once it is within this factor of the largest distance
@@ -237,7 +239,9 @@ class _Engine:
     def _faces(self, pts32: np.ndarray, r2: np.ndarray) -> np.ndarray:
         inter = self._fcpw.interaction_3D_list()
         self.scene.find_closest_points(pts32, r2, inter)
-        return np.fromiter((i.primitive_index for i in inter), dtype=np.int64, count=pts32.shape[0])
+        # fcpw's binding has no array accessor: attrgetter in C is the cheapest way out (0.13 us
+        # a point here, against 0.15 for a generator expression)
+        return np.fromiter(map(_PRIMITIVE, inter), dtype=np.int64, count=pts32.shape[0])
 
     def query(self, points: np.ndarray, radius: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(exact float64 distance to the triangle found (P,), that triangle (P,) int64).

@@ -261,9 +261,9 @@ def test_target_errors_mode():
 def test_options_validated():
     from assetpipe.core.errors import ConfigError
 
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="unknown simplifier"):
         LodOptions(simplifier="nope")
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="first LOD step must be level 0"):
         LodOptions(ratios=(0.5, 0.25))
 
 
