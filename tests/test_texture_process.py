@@ -222,3 +222,115 @@ def test_corpus_use_finder_sees_embedded_images(corpus):
     assert glb and all(u[0].mime in ("image/png", "image/jpeg") for u in glb)
     res = process_texture(*embedded[0])
     check(res, embedded[0][1])
+
+
+# -- the default maximum texture size and the oversize policy (#13) ---------------------------
+
+def _png(width: int, height: int) -> bytes:
+    import cv2
+
+    img = np.zeros((height, width, 3), np.uint8)
+    img[:, ::2] = (200, 40, 10)  # a simple pattern: compresses small
+    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    return buf.tobytes()
+
+
+def test_default_max_size_drops_top_levels_of_an_oversize_image_with_one_warning() -> None:
+    from assetpipe.pipelines.texture_options import DEFAULT_MAX_TEXTURE_SIZE
+
+    assert TextureOptions().max_size == DEFAULT_MAX_TEXTURE_SIZE == 8192
+    res = process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR)
+    assert (res.width, res.height, res.source_width) == (4100, 1, 8200)
+    assert res.warnings == ("/models/wide.png: image 'wide.png' is 8200x2, larger than the maximum texture size 8192: "
+                            "built at 4100x1 (1 top mip level(s) dropped; --max-texture-size 0 keeps the full size, "
+                            "--oversize-textures refuse refuses such images)",)
+    full = process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR, options=TextureOptions(max_size=None))
+    assert (full.width, full.height, full.warnings) == (8200, 2, ())
+    fits = process_texture(source(_png(8192, 2), "fits.png"), ROLE_BASE_COLOR)
+    assert (fits.width, fits.warnings) == (8192, ())
+
+
+def test_refuse_policy_refuses_an_oversize_image_from_its_header() -> None:
+    refuse = TextureOptions(oversize="refuse")
+    with pytest.raises(InvalidTextureError, match=r"wide\.png: image 'wide\.png' is 8200x2: larger than the maximum "
+                                                  r"texture size 8192 \(refused"):
+        process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR, options=refuse)
+    # a JPEG's size comes from Pillow's header read
+    jpeg = encoded(np.zeros((4, 8300, 3), np.uint8), "JPEG")
+    with pytest.raises(InvalidTextureError, match=r"is 8300x4: larger than the maximum texture size 8192"):
+        process_texture(source(jpeg, "wide.jpg"), ROLE_BASE_COLOR, options=refuse)
+    # before decoding: a header claiming 9000x9000 over no pixel data is refused for its size,
+    # where decoding would have found it truncated
+    bomb = _png(1, 1)
+    bomb = bomb[:16] + struct.pack(">II", 9000, 9000) + bomb[24:]
+    with pytest.raises(InvalidTextureError, match="is 9000x9000: larger than the maximum texture size 8192"):
+        process_texture(source(bomb, "bomb.png"), ROLE_BASE_COLOR, options=refuse)
+    with pytest.raises(InvalidTextureError, match="corrupt"):
+        process_texture(source(bomb, "bomb.png"), ROLE_BASE_COLOR)
+    # within the size, refuse changes nothing
+    ok = process_texture(source(_png(64, 8), "ok.png"), ROLE_BASE_COLOR, options=refuse)
+    assert (ok.width, ok.warnings) == (64, ())
+    with pytest.raises(ValueError, match="oversize must be one of downscale, refuse"):
+        TextureOptions(oversize="shrink")
+
+
+_PEAK_SCRIPT = """
+import resource, sys
+from pathlib import Path
+from assetpipe.pipelines.model import ImageSource
+from assetpipe.pipelines.texture_options import TextureOptions
+from assetpipe.pipelines.texture_decode import decode_image
+from assetpipe.pipelines.texture_process import process_texture
+data = Path(sys.argv[1]).read_bytes()
+src = ImageSource(name="big.png", data=data, mime="image/png", origin="big.png", digest="x")
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+if sys.argv[2] == "decode":
+    shape = decode_image(src).shape
+else:
+    shape = process_texture(src, "baseColor", options=TextureOptions()).ktx2 and (0,)
+print(before * 1024, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+"""
+
+
+def _peak_bytes(png: Path, what: str) -> int:
+    """The growth of a fresh process's peak RSS while it decodes / processes ``png``."""
+    import os
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT, str(png), what], capture_output=True, text=True,
+                         check=True, env=os.environ)
+    before, after = map(int, out.stdout.split())
+    return after - before
+
+
+def test_decoding_does_not_copy_the_whole_image_again(tmp_path: Path) -> None:
+    # A 12000x12000 RGB PNG of 440 KB peaked at 2.2 GiB in decode_image: Pillow's image, its
+    # whole RGBA conversion, that conversion's bytes and our array. Converted in 4 MiB bands
+    # into our array, the growth of the peak measured 1.3x the RGBA size (4000^2 and 12000^2),
+    # against 2.9x (4000^2) and 2.0x (12000^2) converted whole.
+    n = 4000
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(n, n))
+    rgba = n * n * 4
+    grown = _peak_bytes(png, "decode")
+    # 1.75x: between the two, with room for allocator noise; a band's copies (crop, convert,
+    # bytes, array) are 16 MiB at most
+    assert grown <= 1.75 * rgba + 16 * 2**20, (grown / rgba)
+
+
+@pytest.mark.bench
+def test_a_12000_square_png_builds_at_6000_within_bounded_memory(tmp_path: Path) -> None:
+    import time
+
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(12000, 12000))
+    t0 = time.perf_counter()
+    grown = _peak_bytes(png, "process")
+    seconds = time.perf_counter() - t0
+    rgba = 12000 * 12000 * 4
+    print(f"12000x12000 PNG ({png.stat().st_size} bytes): peak RSS grew {grown / 2**30:.2f} GiB "
+          f"({grown / rgba:.2f}x the decoded RGBA), {seconds:.1f} s")
+    # the mip chain over the full-size level 0 (16-bit linear intermediates) is the peak: 4x
+    # the decoded RGBA measured; 4.5x leaves room for allocator noise
+    assert grown <= 4.5 * rgba, grown / rgba
