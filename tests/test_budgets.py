@@ -88,3 +88,44 @@ def test_a_changed_budget_reruns_the_import_and_an_unchanged_one_does_not(proj: 
     r = build(proj, "--max-coordinate", "1e6", "--max-triangles", "200")
     assert import_run(r) == "option changed: max_coordinate", r.output
     assert (proj / "out" / "quad.idx").read_bytes() == first  # same model: only the key changed
+
+
+def _textured(proj: Path, width: int, height: int) -> None:
+    import cv2
+    import numpy as np
+
+    (proj / "art" / "quad.obj").write_text("mtllib quad.mtl\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl a\n"
+                                           + QUAD.replace("f 1 2 3\nf 1 3 4", "f 1/1 2/2 3/3\nf 1/1 3/3 4/4"))
+    (proj / "art" / "quad.mtl").write_text("newmtl a\nmap_Kd wide.png\n")
+    ok, buf = cv2.imencode(".png", np.full((height, width, 3), 90, np.uint8))
+    (proj / "art" / "wide.png").write_bytes(buf.tobytes())
+
+
+def test_an_oversize_texture_is_downscaled_with_a_warning_or_refused(proj: Path) -> None:
+    # the build's cap (8192 by default; 20 here so the image stays small)
+    _textured(proj, 40, 4)
+    r = build(proj, "--max-texture-size", "20")
+    assert r.exit_code == 0, r.output
+    side = json.loads((proj / "out" / "quad.asset.json").read_text())
+    assert ("wide.png: image 'wide.png' is 40x4, larger than the maximum texture size 20: built at 20x2 "
+            "(1 top mip level(s) dropped; --max-texture-size 0 keeps the full size, --oversize-textures refuse "
+            "refuses such images)") in side["warnings"]
+    r = build(proj, "--max-texture-size", "20", "--oversize-textures", "refuse")
+    assert r.exit_code == 0 and "option oversize-textures: refuse (command line)" in r.output, r.output
+    side = json.loads((proj / "out" / "quad.asset.json").read_text())
+    assert not any("built at" in w for w in side["warnings"])
+    assert any("skipped" in w and "is 40x4: larger than the maximum texture size 20 (refused" in w
+               for w in side["warnings"]), side["warnings"]
+    # 0 lifts the cap: the full size, no warning
+    r = build(proj, "--max-texture-size", "0")
+    assert r.exit_code == 0 and "option max-texture-size: none (command line)" in r.output, r.output
+    side = json.loads((proj / "out" / "quad.asset.json").read_text())
+    assert not any("wide.png" in w for w in side["warnings"]), side["warnings"]
+    # the project file: the same keys
+    (proj / "assetpipe.toml").write_text('max_texture_size = 20\noversize_textures = "refuse"\n')
+    r = build(proj)
+    assert r.exit_code == 0, r.output
+    assert f"option oversize-textures: refuse ({proj / 'assetpipe.toml'})" in r.output
+    assert f"option max-texture-size: 20 ({proj / 'assetpipe.toml'})" in r.output
+    side = json.loads((proj / "out" / "quad.asset.json").read_text())
+    assert any("(refused" in w for w in side["warnings"])
