@@ -287,18 +287,21 @@ before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 if sys.argv[2] == "decode":
     shape = decode_image(src).shape
 else:
-    shape = process_texture(src, "baseColor", options=TextureOptions()).ktx2 and (0,)
+    options = TextureOptions(max_size=int(sys.argv[3])) if len(sys.argv) > 3 else TextureOptions()
+    shape = process_texture(src, "baseColor", options=options).ktx2 and (0,)
 print(before * 1024, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 """
 
 
-def _peak_bytes(png: Path, what: str) -> int:
-    """The growth of a fresh process's peak RSS while it decodes / processes ``png``."""
+def _peak_bytes(png: Path, what: str, max_size: int | None = None) -> int:
+    """The growth of a fresh process's peak RSS while it decodes / processes ``png`` (with
+    ``TextureOptions(max_size=max_size)`` when given)."""
     import os
     import subprocess
     import sys
 
-    out = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT, str(png), what], capture_output=True, text=True,
+    extra = [str(max_size)] if max_size is not None else []
+    out = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT, str(png), what, *extra], capture_output=True, text=True,
                          check=True, env=os.environ)
     before, after = map(int, out.stdout.split())
     return after - before
@@ -317,6 +320,25 @@ def test_decoding_does_not_copy_the_whole_image_again(tmp_path: Path) -> None:
     # 1.75x: between the two, with room for allocator noise; a band's copies (crop, convert,
     # bytes, array) are 16 MiB at most
     assert grown <= 1.75 * rgba + 16 * 2**20, (grown / rgba)
+
+
+def test_an_oversize_texture_peaks_no_higher_than_its_decoding(tmp_path: Path) -> None:
+    # 6000x6000 capped at 2048 (built at 1500x1500; levels 0 and 1 dropped). The mip chain used
+    # to make a 16-bit copy of the full-size level 0 (2x the RGBA) before dropping levels:
+    # process_texture's peak grew 4.0x the decoded RGBA against decoding's 2.1x. Now the kept
+    # levels come from bands of the 8-bit source: measured 2.13x, decoding's own peak (the mip
+    # step adds 0.7x over the RGBA it holds, below that peak).
+    n = 6000
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(n, n))
+    rgba = n * n * 4
+    decoding = _peak_bytes(png, "decode")
+    grown = _peak_bytes(png, "process", max_size=2048)
+    # the bound: the higher of decoding's peak and the RGBA held plus the mip step's working
+    # set (dropped level 1 in 16 bits 0.5x, level 2 0.125x, 8-bit levels and the KTX2 < 0.1x,
+    # bands 16 MiB each), plus 0.1x for allocator noise
+    bound = max(decoding, rgba * (1 + 0.5 + 0.125 + 0.1) + 32 * 2**20) + 0.1 * rgba
+    assert grown <= bound, (grown / rgba, decoding / rgba)
 
 
 @pytest.mark.bench
