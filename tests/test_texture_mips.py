@@ -318,17 +318,21 @@ def test_png_roundtrip_helper_sanity():
 
 # ----------------------------------------------------------------------------- dropped levels (#13)
 
-@pytest.mark.parametrize("h,w,max_size", [(300, 1000, 256), (211, 211, 100), (257, 1000, 300), (1000, 257, 60),
-                                          (384, 999, 128), (7, 600, 100), (600, 3, 40), (97, 61, 1)])
-def test_dropped_levels_equal_the_full_chains_levels_for_every_role(h, w, max_size, monkeypatch):
+@pytest.mark.parametrize("h,w,max_size,gather", [(300, 1000, 256, 0), (211, 211, 100, 1), (257, 1000, 300, 0),
+                                                 (1000, 257, 60, 1), (384, 999, 128, 1), (7, 600, 100, 0),
+                                                 (600, 3, 40, 1), (97, 61, 1, 0)])
+def test_dropped_levels_equal_the_full_chains_levels_for_every_role(h, w, max_size, gather, monkeypatch):
     # The chain without its top levels is computed from bands of rows of the source (the
     # working copy of level 0 never whole); it must be the full chain's levels byte for byte:
     # integer and fractional ratios from level 0 (211 -> 105, 1000 -> 62 wide, 257 rows),
     # a 1-row level, 8- and 16-bit sources, every filter. Bands of 8192 texels: many bands,
-    # band edges inside footprints.
+    # band edges inside footprints. gather=0: only fractional levels narrower than 1/32 of the
+    # source keep their horizontal pass whole, the others are summed band by band.
     from assetpipe.pipelines import texture_mips
 
     monkeypatch.setattr(texture_mips, "_BAND_TEXELS", 8192)
+    if not gather:
+        monkeypatch.setattr(texture_mips, "_GATHER_MIN_BYTES", 0)
     rng = np.random.default_rng(h * 7 + w)
     rgba8 = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
     opaque8 = rgba8.copy()

@@ -353,7 +353,10 @@ def test_a_12000_square_png_builds_at_6000_within_bounded_memory(tmp_path: Path)
     rgba = 12000 * 12000 * 4
     print(f"12000x12000 PNG ({png.stat().st_size} bytes): peak RSS grew {grown / 2**30:.2f} GiB "
           f"({grown / rgba:.2f}x the decoded RGBA), {seconds:.1f} s")
-    # the peak is the mip chain's 16-bit copy of the full-size level 0 (pipelines/texture_mips.py,
-    # made before the top level is dropped): measured 3.2x the decoded RGBA (1.72 GiB), decoding
-    # alone 1.3x; 4.5x leaves room for allocator noise
-    assert grown <= 4.5 * rgba, grown / rgba
+    # the peak was the mip chain's 16-bit copy of the full-size level 0 (made before the top level
+    # was dropped): measured 3.2x the decoded RGBA (1.72 GiB). The kept levels now come from bands
+    # of the 8-bit source (pipelines/texture_mips.py, _chain_dropping): measured 1.24x in this
+    # test (2.03x in a plain fresh process, /usr/bin/time: decoding's own peak). After decoding
+    # the step holds the RGBA (1x), level 1 in 16 bits (0.5x), the 8-bit levels and the KTX2
+    # (0.33x each): 2.2x; 2.5x leaves room for allocator noise
+    assert grown <= 2.5 * rgba, grown / rgba
