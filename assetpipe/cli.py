@@ -12,7 +12,7 @@ from assetpipe.core.errors import AssetpipeError
 from assetpipe.build_types import DEFAULT_BUILD_LIMITS
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
 from assetpipe.pipelines.lod_options import SIMPLIFIERS
-from assetpipe.pipelines.texture_options import TEXTURE_CODECS
+from assetpipe.pipelines.texture_options import OVERSIZE_POLICIES, TEXTURE_CODECS
 
 _D = DEFAULT_BUILD_OPTIONS
 
@@ -26,8 +26,10 @@ def main() -> None:
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
                    lock_border: bool, max_texture_size: int | None, recenter: bool = False,
                    lod_max_error: float | None = None, lod_screen_sizes: str | None = None,
-                   texture_compression: str | None = None, texture_zstd: bool = False):
-    """BuildOptions from the command line; unspecified values keep the dataclass defaults."""
+                   texture_compression: str | None = None, texture_zstd: bool = False,
+                   oversize_textures: str | None = None, budgets: dict | None = None):
+    """BuildOptions from the command line; unspecified values keep the dataclass defaults.
+    ``max_texture_size`` 0: no cap; ``budgets``: InputBudgets fields to change (None values kept)."""
     import dataclasses
 
     from assetpipe.options import BuildOptions
@@ -51,14 +53,20 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
             if lod_screen_sizes:
                 changes["target_screen_sizes"] = (0.0, *(float(x) for x in lod_screen_sizes.split(",")))
             lod = dataclasses.replace(d.lod, **changes)
-        texture = dataclasses.replace(d.texture, max_size=max_texture_size) if max_texture_size else d.texture
+        texture = d.texture
+        if max_texture_size is not None:  # 0 lifts the cap
+            texture = dataclasses.replace(texture, max_size=max_texture_size or None)
+        if oversize_textures:
+            texture = dataclasses.replace(texture, oversize=oversize_textures)
+        changes = {k: v for k, v in (budgets or {}).items() if v is not None}
+        input_budgets = dataclasses.replace(d.budgets, **changes) if changes else d.budgets
         if texture_compression:
             texture = dataclasses.replace(texture, compression=texture_compression)
         if texture_zstd:
             texture = dataclasses.replace(texture, supercompression="zstd")
     except (ValueError, TypeError, AssetpipeError) as exc:  # ConfigError: an option out of range
         raise click.BadParameter(str(exc)) from None
-    return BuildOptions(mesh=mesh, lod=lod, texture=texture)
+    return BuildOptions(mesh=mesh, lod=lod, texture=texture, budgets=input_budgets)
 
 
 def _project_defaults(inputs, **given):
@@ -113,8 +121,12 @@ def eval_ratio(text: str) -> float:
 @click.option("--lod-screen-sizes", default=None,
               help="Make LOD levels for these on-screen sizes (pixels the mesh's diagonal spans, decreasing, "
                    "e.g. '400,100,25') instead of ratios: each level's error is at most one pixel at its size.")
-@click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None,
-              help="Downsize textures so neither side exceeds this (power of two steps).")
+@click.option("--max-texture-size", type=click.IntRange(0, 16384), default=None,
+              help=f"Downsize textures so neither side exceeds this (whole mip levels dropped, with a warning); "
+                   f"0: no cap [default: {_D.texture.max_size}].")
+@click.option("--oversize-textures", type=click.Choice(OVERSIZE_POLICIES), default=None,
+              help=f"What to do with a texture larger than --max-texture-size: downscale it, or refuse it "
+                   f"(the texture is skipped with a warning, as an undecodable one) [default: {_D.texture.oversize}].")
 @click.option("--recenter", is_flag=True,
               help="Write positions relative to each model's bounding-box centre (the offset goes into the "
                    "sidecar's positionOffset): keeps float32 precision for models far from their origin.")
@@ -128,9 +140,22 @@ def eval_ratio(text: str) -> float:
               help=f"GPU block compression of the KTX2 textures: bc (BC7/BC5/BC4), etc2 (ETC2/EAC) "
                    f"[default: {_D.texture.compression}].")
 @click.option("--texture-zstd", is_flag=True, help="Zstandard-supercompress the KTX2 levels (KTX2 scheme 2).")
+@click.option("--max-model-mb", type=click.FloatRange(min=0, min_open=True), default=None,
+              help=f"Refuse a model whose declared geometry (glTF accessor counts times placements) would take "
+                   f"more than this many MiB decoded [default: {_D.budgets.max_model_bytes / 2**20:g}].")
+@click.option("--max-placements", type=click.IntRange(1, None), default=None,
+              help=f"Refuse a glTF model whose nodes place meshes more often than this "
+                   f"[default: {_D.budgets.max_placements}].")
+@click.option("--max-triangles", type=click.IntRange(1, None), default=None,
+              help=f"Refuse a model with more triangles than this after triangulation "
+                   f"[default: {_D.budgets.max_triangles}].")
+@click.option("--max-coordinate", type=click.FloatRange(min=0, min_open=True), default=None,
+              help=f"Refuse a model with a position coordinate larger than this in absolute value "
+                   f"[default: {_D.budgets.max_coordinate:g}].")
 def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
-          max_image_pixels, texture_compression, texture_zstd) -> None:
+          max_image_pixels, texture_compression, texture_zstd, oversize_textures, max_model_mb, max_placements,
+          max_triangles, max_coordinate) -> None:
     """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
     files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
     what its objects can use, and OUT/<scene>.scene.json lists the instances."""
@@ -146,10 +171,13 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  simplifier=simplifier, lock_border=lock_border, lod_max_error=lod_max_error,
                  lod_screen_sizes=lod_screen_sizes, max_texture_size=max_texture_size, recenter=recenter,
                  max_output_mb=max_output_mb, max_image_pixels=max_image_pixels,
-                 texture_compression=texture_compression, texture_zstd=texture_zstd)
+                 texture_compression=texture_compression, texture_zstd=texture_zstd,
+                 oversize_textures=oversize_textures, max_model_mb=max_model_mb, max_placements=max_placements,
+                 max_triangles=max_triangles, max_coordinate=max_coordinate)
     values, origin = _project_defaults(inputs, **given)
     (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, lod_max_error, lod_screen_sizes,
-     max_texture_size, recenter, max_output_mb, max_image_pixels, texture_compression, texture_zstd) = values
+     max_texture_size, recenter, max_output_mb, max_image_pixels, texture_compression, texture_zstd,
+     oversize_textures, max_model_mb, max_placements, max_triangles, max_coordinate) = values
     if jobs is None:
         jobs = usable_cpus()  # as ninja: the CPUs this process may run on
     if explain:
@@ -160,14 +188,22 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  "simplifier": simplifier or _D.lod.simplifier, "lock_border": lock_border,
                  "lod_max_error": _D.lod.max_error if lod_max_error is None else lod_max_error,
                  "lod_screen_sizes": lod_screen_sizes or "none",
-                 "max_texture_size": max_texture_size or "none", "recenter": recenter,
+                 "max_texture_size": (_D.texture.max_size if max_texture_size is None else max_texture_size) or "none",
+                 "recenter": recenter, "oversize_textures": oversize_textures or _D.texture.oversize,
+                 "max_model_mb": max_model_mb or _D.budgets.max_model_bytes / 2**20,
+                 "max_placements": max_placements or _D.budgets.max_placements,
+                 "max_triangles": max_triangles or _D.budgets.max_triangles,
+                 "max_coordinate": max_coordinate or _D.budgets.max_coordinate,
                  "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels,
                  "texture_compression": texture_compression or _D.texture.compression, "texture_zstd": texture_zstd}
         for name, where in origin.items():
             click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
+    budgets = dict(max_model_bytes=None if max_model_mb is None else int(max_model_mb * 2**20),
+                   max_placements=max_placements, max_triangles=max_triangles, max_coordinate=max_coordinate)
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
-                             lod_max_error, lod_screen_sizes, texture_compression, texture_zstd)
+                             lod_max_error, lod_screen_sizes, texture_compression, texture_zstd,
+                             oversize_textures, budgets)
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))
@@ -224,7 +260,7 @@ _register_renderer_commands()
 @click.option("--no-lod", is_flag=True, help="As for build.")
 @click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None, help="As for build.")
 @click.option("--lock-border", is_flag=True, help="As for build.")
-@click.option("--max-texture-size", type=click.IntRange(1, 16384), default=None, help="As for build.")
+@click.option("--max-texture-size", type=click.IntRange(0, 16384), default=None, help="As for build.")
 def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border,
           max_texture_size) -> None:
     """Build INPUTS into OUT, then rebuild what changed whenever a source is saved (Ctrl-C stops)."""

@@ -291,8 +291,10 @@ class Graph:
                 a.inputs[str(src.resolve())] = src_digest
                 # the name too: an OBJ's unnamed mesh is named after its file (#13: a cached import
                 # of the same bytes under another name gave the other file's mesh name)
-                kin = self._key_inputs("import", {"source": src_digest, "name": src.name}, None)
-                jobs.append(([a], label, kin, (steps.task_import, str(self.store.root), str(src))))
+                # the input budgets are its options: a changed budget re-runs the import (#13)
+                budgets = steps.options_to_json(self._options(a).budgets)
+                kin = self._key_inputs("import", {"source": src_digest, "name": src.name}, budgets)
+                jobs.append(([a], label, kin, (steps.task_import, str(self.store.root), str(src), budgets)))
         # a record is valid only while the files the import read (.bin, .mtl) are unchanged
         self._run_phase(jobs, accept=lambda call, rec: self._deps_match(Path(call[2]), rec), with_record=_with_deps)
         for a in assets:
@@ -397,6 +399,12 @@ class Graph:
                     a.error = (f"{path}: every one of its {rec['meta']['degenerate']} triangles is degenerate in "
                                "float32 (zero area, a repeated vertex, or a position beyond float32's range): "
                                "nothing left to build")
+        for a in assets:  # textures over the build's max_size (a scene's own caps are reported below)
+            if a.plan is None and not a.failed:
+                for label in dict.fromkeys(a.texture_jobs.values()):
+                    rec = a.records.get(label)
+                    if rec is not None:
+                        a.warnings.extend(rec["meta"].get("warnings", []))
         for a in assets:
             if a.plan is None or a.failed:
                 continue

@@ -9,7 +9,9 @@ table, found from the inputs' folders upward. Its keys are the build command's o
     lod = true                               # false: LOD0 only (--no-lod)
     simplifier = "meshopt-attr"
     lock_border = false
-    max_texture_size = 2048
+    max_texture_size = 2048                  # 0: no cap (default 8192)
+    oversize_textures = "downscale"          # or "refuse"
+    max_triangles = 50_000_000               # input budgets: max_model_mb, max_placements, max_coordinate too
     jobs = 8
     cache = "../.assetpipe-cache"            # relative to the project file
 
@@ -34,7 +36,7 @@ KEYS: dict[str, tuple[tuple[type, ...], str]] = {
     "lod": ((bool,), "true or false (false: LOD0 only)"),
     "simplifier": ((str,), "the LOD simplifier's name"),
     "lock_border": ((bool,), "true or false"),
-    "max_texture_size": ((int,), "a whole number of pixels"),
+    "max_texture_size": ((int,), "a whole number of pixels (0: no cap)"),
     "lod_max_error": ((int, float), "a fraction of the mesh's diagonal (0: no budget)"),
     "lod_screen_sizes": ((list, str), "on-screen sizes in pixels: a list of numbers or a string like '400,100,25'"),
     "recenter": ((bool,), "true or false"),
@@ -42,6 +44,11 @@ KEYS: dict[str, tuple[tuple[type, ...], str]] = {
     "max_image_pixels": ((int,), "a whole number of texels"),
     "texture_compression": ((str,), "none, bc or etc2"),
     "texture_zstd": ((bool,), "true or false"),
+    "oversize_textures": ((str,), "downscale or refuse"),
+    "max_model_mb": ((int, float), "a size in MiB (a model's declared geometry, decoded)"),
+    "max_placements": ((int,), "a whole number of mesh placements"),
+    "max_triangles": ((int,), "a whole number of triangles"),
+    "max_coordinate": ((int, float), "the largest absolute position coordinate"),
     "jobs": ((int,), "a whole number of worker processes"),
     "cache": ((str,), "a folder, relative to the project file"),
 }
@@ -71,7 +78,8 @@ class ProjectConfig:
             r = v["lod_screen_sizes"]
             out["lod_screen_sizes"] = ",".join(f"{x:g}" for x in r) if isinstance(r, list) else r
         for key in ("simplifier", "lock_border", "max_texture_size", "jobs", "lod_max_error", "recenter",
-                    "max_output_mb", "max_image_pixels", "texture_compression", "texture_zstd"):
+                    "max_output_mb", "max_image_pixels", "texture_compression", "texture_zstd",
+                    "oversize_textures", "max_model_mb", "max_placements", "max_triangles", "max_coordinate"):
             if key in v:
                 out[key] = v[key]
         if "cache" in v:

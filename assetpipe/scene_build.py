@@ -82,7 +82,8 @@ class SceneRun:
             mid = candidate
             used.add(mid.lower())
             lod = mp.lod_options_for(self.options.lod) if self.options.lod is not None else None
-            opts = dataclasses.replace(BuildOptions(mesh=self.options.mesh, lod=lod, texture=self.options.texture))
+            opts = dataclasses.replace(BuildOptions(mesh=self.options.mesh, lod=lod, texture=self.options.texture,
+                                                     budgets=self.options.budgets))
             digest = options_digest({"options": opts.to_json(), "plan": _plan_fingerprint(mp)})
             spec = AssetSpec(source=key.sources[0], id=mid, options=opts, options_digest=digest,
                              key=f"{key.sources[0].resolve()}#{mid}", plan=mp, extra_sources=tuple(key.sources[1:]),

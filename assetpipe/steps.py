@@ -63,14 +63,16 @@ def _relative(path: Path, base: Path) -> str:
         return str(path)
 
 
-def task_import(store_root: str, source: str) -> dict:
-    """Import a model file; store its geometry and materials (and embedded images)."""
+def task_import(store_root: str, source: str, budgets: dict | None = None) -> dict:
+    """Import a model file; store its geometry and materials (and embedded images).
+    ``budgets``: :class:`pipelines.budgets.InputBudgets` as a dict (None: the defaults)."""
     from assetpipe.core.hashing import digest_file
     from assetpipe.model_import import import_model
+    from assetpipe.pipelines.budgets import InputBudgets
 
     store = Store(Path(store_root))
     src = Path(source)
-    model = import_model(src)
+    model = import_model(src, options_from_json(InputBudgets, budgets))
     base = src.parent
     images: list[dict] = []
     image_index: dict[tuple, int] = {}
@@ -327,6 +329,8 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
             "hasAlphaBelow255": pt.has_alpha_below_255, "meanDrift": list(pt.mean_drift),
             "coverage": list(pt.coverage) if pt.coverage is not None else None,
             "sourceDigest": src.digest, "sourceWidth": pt.source_width, "sourceHeight": pt.source_height}
+    if pt.warnings:  # levels dropped for max_size (#13)
+        meta["warnings"] = list(pt.warnings)
     return {"blobs": blobs, "meta": meta}
 
 

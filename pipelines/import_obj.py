@@ -61,8 +61,9 @@ __all__ = ["import_obj"]
 # Stands for an absent vt/vn slot ("1//3", "1/2/") while parsing: never a real index.
 _ABSENT = 1 << 62
 _ABSENT_B = str(_ABSENT).encode()
-# Face lines parsed at a time (bounds the parsing temporaries: about 100 bytes per face line).
-_FACE_CHUNK_LINES = 1 << 20
+# Bytes of face lines parsed at a time (whole lines): bounds the parsing temporaries, about
+# 30 bytes per byte of face text.
+_FACE_CHUNK_BYTES = 1 << 20
 
 _FREEFORM = frozenset({"vp", "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm",
                        "trim", "hole", "scrv", "sp", "end", "con"})
@@ -169,21 +170,25 @@ def _parse_geometry(lines: Lines, path: Path, warnings: list[str],
         k = int(np.argmin(ok))
         raise InvalidGeometryError(path, f"normal {k + 1} (line {vn_lines[k] + 1}) is not finite")
 
-    # -- f, in chunks of lines so the parsing temporaries stay bounded (a 80 MB file of 10M
-    # "f 1 1 1" lines took 3.75 GB parsed whole); degenerate triangles are dropped per chunk.
+    # -- f, in chunks of whole lines so the parsing temporaries stay bounded (a 80 MB file of
+    # 10M "f 1 1 1" lines took 3.84 GB parsed whole); degenerate triangles are dropped per chunk.
     text, f_lines = lines.region(F, 1)
-    arr = np.frombuffer(text, np.uint8)
-    nl = np.flatnonzero(arr == NL)
     parts: list[tuple[np.ndarray, ...]] = []
     dropped = 0
-    for c0 in range(0, f_lines.size, _FACE_CHUNK_LINES):
-        c1 = min(c0 + _FACE_CHUNK_LINES, f_lines.size)
-        b0 = int(nl[c0 - 1]) + 1 if c0 else 0
-        b1 = int(nl[c1 - 1]) + 1
+    b0 = c0 = 0
+    while b0 < len(text):  # a loop over chunks of megabytes, not lines
+        b1 = b0 + _FACE_CHUNK_BYTES
+        if b1 >= len(text):
+            b1 = len(text)
+        else:  # end on a line end: the last one in the chunk, else the first after it (a huge line)
+            cut = text.rfind(b"\n", b0, b1)
+            b1 = (cut if cut >= 0 else text.index(b"\n", b1)) + 1
+        c1 = c0 + text.count(b"\n", b0, b1)
         part = _parse_faces(text[b0:b1], f_lines[c0:c1], v_lines, vt_lines, vn_lines, lines, path)
         dropped += part[-1]
         parts.append(part[:-1])
-    del arr, nl, text
+        b0, c0 = b1, c1
+    del text
     if parts:
         per_line, corner_v, corner_vt, corner_vn, line_of = (np.concatenate(x) for x in zip(*parts))
         f_lines = line_of

@@ -129,16 +129,18 @@ class Lines:
     """The lines of a normalised file. All arrays have one entry per line (L lines)."""
 
     data: bytes
-    starts: np.ndarray  # (L,) int64 offset of the line's first byte
-    ends: np.ndarray  # (L,) int64 offset of its "\n"
-    first: np.ndarray  # (L,) int64 offset of its first non-blank byte (== end if blank)
+    starts: np.ndarray  # (L,) int32 (int64 for files over 2 GiB) offset of the line's first byte
+    ends: np.ndarray  # (L,) same dtype, offset of its "\n"
+    first: np.ndarray  # (L,) same dtype, offset of its first non-blank byte (== end if blank)
     cls: np.ndarray  # (L,) int8 line class (V, F, ...)
-    _byte_cls: np.ndarray | None = None  # (B,) int8 class of every byte, built on first use
 
     @classmethod
     def split(cls, data: bytes) -> "Lines":
+        """``data``: normalised text (:func:`read_normalised`: ends in ``\n``)."""
         buf = np.frombuffer(data, np.uint8)
-        ends = np.flatnonzero(buf == NL)
+        # offsets as int32 when they fit: 12 bytes a line instead of 24 (a 80 MB file of 10M
+        # short lines kept 230 MB of offsets)
+        ends = np.flatnonzero(buf == NL).astype(np.int32 if buf.size < 2**31 - 4 else np.int64)
         starts = np.empty_like(ends)
         starts[0] = 0
         starts[1:] = ends[:-1] + 1
@@ -147,8 +149,10 @@ class Lines:
         if indented.size:  # rare: only these lines need a search for their first non-blank
             nonblank = np.flatnonzero(buf != SPACE)  # includes the "\n"s, so always found
             first[indented] = nonblank[np.searchsorted(nonblank, starts[indented])]
-        pad = np.frombuffer(data + b"   ", np.uint8)
-        c0, c1, c2 = pad[first], pad[first + 1], pad[first + 2]
+        # the bytes after a line's first one, reading the final "\n" past the end (a blank, as
+        # a separator should be) instead of padding a copy of the file
+        last = buf.size - 1
+        c0, c1, c2 = buf[first], buf[np.minimum(first + 1, last)], buf[np.minimum(first + 2, last)]
         sep1 = (c1 == SPACE) | (c1 == NL)
         sep2 = (c2 == SPACE) | (c2 == NL)
         kind = np.full(ends.shape, OTHER, np.int8)
@@ -167,21 +171,36 @@ class Lines:
     def region(self, kind: int, keyword_len: int) -> tuple[bytes, np.ndarray]:
         """The bytes of all lines of one class, keywords blanked, each line ending in "\\n".
 
-        Returns (bytes, line numbers (K,) int64, 0-based, of those lines). ``#`` comments at
+        Returns (bytes, line numbers (K,) int32, int64 for files over 2 GiB, 0-based, of those
+        lines). ``#`` comments at
         the end of the lines are blanked too.
         """
-        idx = np.flatnonzero(self.cls == kind)
+        idx = np.flatnonzero(self.cls == kind).astype(self.starts.dtype)  # int32 when offsets fit
+        if idx.size == 0:
+            return b"", idx
         buf = np.frombuffer(self.data, np.uint8)
-        lengths = self.ends - self.starts + 1
-        if self._byte_cls is None:
-            self._byte_cls = np.repeat(self.cls, lengths)
-        mask = self._byte_cls == kind
-        # keyword bytes, relative positions inside the kept bytes
-        out = buf[mask]
-        kept_starts = np.cumsum(lengths[idx]) - lengths[idx]
-        kw = kept_starts + (self.first[idx] - self.starts[idx])
+        # runs of consecutive lines of the class: each run's bytes are contiguous in the file
+        brk = np.flatnonzero(np.diff(idx) != 1)
+        run_first = idx[np.concatenate(([0], brk + 1))]
+        run_last = idx[np.concatenate((brk, [idx.size - 1]))]
+        b0 = self.starts[run_first].astype(np.int64)
+        b1 = self.ends[run_last].astype(np.int64) + 1
+        if b0.size == 1:  # one block of lines (the usual file: all v, then all f): one copy
+            out = buf[int(b0[0]):int(b1[0])].copy()
+            kw = self.first[idx] - int(b0[0])
+        else:
+            edge = np.zeros(buf.size + 1, np.int8)
+            edge[b0] = 1
+            edge[b1] -= 1  # runs are apart (another line between), so the running sum is 0 or 1
+            out = buf[np.cumsum(edge[:-1], dtype=np.int8).view(bool)]
+            del edge
+            # a line's keyword moves left by the bytes dropped before its run
+            lengths = b1 - b0
+            shift = b0 - (np.cumsum(lengths) - lengths)
+            kw = self.first[idx] - np.repeat(shift, np.diff(np.concatenate(([0], brk + 1, [idx.size]))))
         for k in range(keyword_len):
             out[kw + k] = SPACE
+        del kw
         if b"#" in self.data:
             _blank_comments(out)
         return out.tobytes(), idx
@@ -192,12 +211,14 @@ def _blank_comments(arr: np.ndarray) -> None:
     hashes = np.flatnonzero(arr == ord("#"))
     if hashes.size == 0:
         return
-    newline = arr == NL
-    line_of = np.cumsum(newline) - newline
-    first_hash = np.full(int(line_of[-1]) + 1, arr.size, np.int64)
-    np.minimum.at(first_hash, line_of[hashes], hashes)
-    kill = (np.arange(arr.size) >= first_hash[line_of]) & ~newline
-    arr[kill] = SPACE
+    nl = np.flatnonzero(arr == NL)  # the region ends in "\n": every hash has one after it
+    line_of = np.searchsorted(nl, hashes)
+    firsts = np.concatenate(([True], line_of[1:] != line_of[:-1]))  # the first hash of each line
+    start, stop = hashes[firsts], nl[line_of[firsts]]
+    edge = np.zeros(arr.size + 1, np.int8)  # one range a line: the running sum is 0 or 1
+    edge[start] = 1
+    edge[stop] -= 1
+    arr[np.cumsum(edge[:-1], dtype=np.int8).view(bool)] = SPACE
 
 
 @dataclass

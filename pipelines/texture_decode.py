@@ -215,17 +215,17 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
     return rgba
 
 
+# Rows converted at a time: the RGBA copy is made band by band into the output array, so
+# decoding holds Pillow's image and our array, never a whole-image RGBA copy and its bytes too
+# (a 12000x12000 RGB PNG peaked at 2.2 GiB converted whole, 1.2 GiB in bands; see
+# tests/test_texture_process.py's peak-memory test).
+_BAND_BYTES = 4 << 20
+
+
 def _to_rgba(im: Image.Image) -> np.ndarray:
     """Any Pillow mode to ``(H, W, 4)`` uint8 RGBA, honouring palette / colour-key transparency."""
     mode = im.mode
-    if mode == "RGBA":
-        rgba = im
-    elif mode in ("RGBa", "La"):  # premultiplied modes (rare in files): un-premultiply
-        rgba = im.convert("RGBA")
-    elif mode in ("P", "PA", "L", "LA", "RGB", "1"):
-        # Pillow applies palette tRNS and grey / RGB colour keys (info["transparency"]).
-        rgba = im.convert("RGBA")
-    elif mode in ("I;16", "I;16B", "I;16L", "I", "F"):
+    if mode in ("I;16", "I;16B", "I;16L", "I", "F"):
         # 16-bit grey from a non-PNG container (PNGs take the OpenCV path): keep 8 bits.
         arr = np.asarray(im, dtype=np.float64)
         scale = 255.0 / 65535.0 if mode.startswith("I") else 255.0
@@ -234,12 +234,48 @@ def _to_rgba(im: Image.Image) -> np.ndarray:
         out[..., :3] = grey[..., None]
         out[..., 3] = 255
         return out
+    if mode == "RGBA":
+        convert = None
+    elif mode in ("RGBa", "La", "P", "PA", "L", "LA", "RGB", "1"):
+        # premultiplied modes are un-premultiplied; Pillow applies palette tRNS and grey / RGB
+        # colour keys (info["transparency"], kept by crop)
+        convert = ("RGBA",)
     else:  # CMYK, YCbCr, LAB, HSV, ...
-        rgba = im.convert("RGB").convert("RGBA")
-    arr = np.asarray(rgba, dtype=np.uint8)
-    if arr.ndim != 3 or arr.shape[2] != 4:  # pragma: no cover - defensive
-        raise ValueError(f"unexpected decoded shape {arr.shape}")
-    return np.ascontiguousarray(arr)
+        convert = ("RGB", "RGBA")
+    width, height = im.size
+    out = np.empty((height, width, 4), dtype=np.uint8)
+    rows = max(1, _BAND_BYTES // (4 * max(width, 1)))
+    for y0 in range(0, height, rows):  # a loop over bands of rows, not texels
+        y1 = min(height, y0 + rows)
+        band = im.crop((0, y0, width, y1)) if (y0, y1) != (0, height) else im
+        for m in convert or ():
+            band = band.convert(m)
+        arr = np.asarray(band, dtype=np.uint8)
+        if arr.shape != (y1 - y0, width, 4):  # pragma: no cover - defensive
+            raise ValueError(f"unexpected decoded shape {arr.shape}")
+        out[y0:y1] = arr
+    return out
+
+
+def image_size(image: ImageSource) -> tuple[int, int] | None:
+    """``(width, height)`` read from the image's header, without decoding a pixel; ``None`` when
+    the header cannot be read (:func:`decode_image` then says what is wrong)."""
+    ihdr = _png_ihdr(image.data)
+    if ihdr is not None:
+        return ihdr[0], ihdr[1]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            saved = Image.MAX_IMAGE_PIXELS
+            Image.MAX_IMAGE_PIXELS = None  # a header read allocates nothing; our limits apply later
+            try:
+                with Image.open(io.BytesIO(image.data), formats=_PIL_FORMAT_HINT.get(image.mime)) as im:
+                    return int(im.width), int(im.height)
+            finally:
+                Image.MAX_IMAGE_PIXELS = saved
+    except (OSError, ValueError, SyntaxError, EOFError, struct.error, IndexError, TypeError,
+            Image.UnidentifiedImageError):
+        return None
 
 
 def has_alpha_below_255(rgba: np.ndarray) -> bool:

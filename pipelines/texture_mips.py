@@ -38,6 +38,15 @@ or from level 0 with INTER_AREA's fractional area weights when no level divides 
   The vectors before quantisation are unit length to float32 precision.
 * Alpha of every non-baseColor role is filtered linearly.
 
+Oversize sources (``options.max_size``): the top levels are dropped before the chain is built.
+The kept levels are byte for byte the full chain's, but neither level 0's working copy (16-bit
+or float32: 2x or 4x the 8-bit source) nor a dropped level that no kept level is filtered
+from is ever made: the levels filtered from level 0 are computed from bands of its rows
+(``_chain_dropping``; one pass over the source for all of them where their working sets are
+small). A 12000x12000 RGBA8 source built at 6000x6000: peak RSS growth in build_mip_chain
+0.54 GiB instead of 1.61 GiB, same time (10.0 vs 10.4 s, baseColor); normal maps 1.56 GiB
+instead of 6.2 GiB (fresh processes, one after the other).
+
 Accuracy (tests): mean absolute error per level <= 0.5 (8-bit units) against a float64 exact
 area average in linear light; the rounding to 8 bits alone accounts for ~0.25.
 """
@@ -192,6 +201,187 @@ def _chain(work0: np.ndarray, sizes: list[tuple[int, int]]) -> list[np.ndarray]:
     return works
 
 
+# -- chains whose top levels are dropped (max_size) ----------------------------------------------
+# The same levels as _chain(to_work(level 0), sizes)[first:], byte for byte, without the working
+# copy of level 0 (16-bit: twice the 8-bit source; float32: four times): every level the chain
+# takes from level 0 is computed from bands of rows of the source, converted band by band.
+# Integer ratios: INTER_AREA per band, bands aligned to the ratio (what OpenCV computes for a
+# row depends only on the rows of its footprint and the scale). Fractional ratios: OpenCV's
+# generic INTER_AREA is separable in float32 (each source row resampled horizontally, then the
+# rows of a footprint summed with their weights, in order, then rounded); the horizontal pass
+# runs per band (cv2.resize with a vertical scale of 1, or the same weights in numpy where the
+# horizontal ratio is an integer and OpenCV would take its integer fast path), the vertical sum
+# replays OpenCV's weight table in numpy over the band's output rows.
+
+def _area_table(n_src: int, n_dst: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """OpenCV's INTER_AREA weight table (``computeResizeAreaTab``) for ``n_src -> n_dst``.
+
+    Returns ``(src (n_dst, m) int64, alpha (n_dst, m) float32, count (n_dst,) int64)``: output
+    ``i`` is ``sum(alpha[i, t] * x[src[i, t]] for t < count[i])``, summed in that order.
+    """
+    scale = 1.0 / (n_dst / n_src)  # as cv::resize derives it (1 / inv_scale)
+    rows: list[list[tuple[int, float]]] = []
+    for dx in range(n_dst):  # loop over output rows to build the table, as OpenCV does
+        fsx1 = dx * scale
+        fsx2 = fsx1 + scale
+        cell = min(scale, n_src - fsx1)
+        sx1, sx2 = math.ceil(fsx1), math.floor(fsx2)
+        sx2 = min(sx2, n_src - 1)
+        sx1 = min(sx1, sx2)
+        row = []
+        if sx1 - fsx1 > 1e-3:
+            row.append((sx1 - 1, (sx1 - fsx1) / cell))
+        row.extend((sx, 1.0 / cell) for sx in range(sx1, sx2))
+        if fsx2 - sx2 > 1e-3:
+            row.append((sx2, min(min(fsx2 - sx2, 1.0), cell) / cell))
+        rows.append(row)
+    count = np.array([len(r) for r in rows], np.int64)
+    src = np.zeros((n_dst, int(count.max())), np.int64)
+    alpha = np.zeros(src.shape, np.float32)
+    for i, row in enumerate(rows):
+        src[i, :len(row)] = [e[0] for e in row]
+        alpha[i, :len(row)] = [e[1] for e in row]  # float64 -> float32, rounded as C's cast
+    return src, alpha, count
+
+
+def _weighted_sum(x: np.ndarray, axis: int, src: np.ndarray, alpha: np.ndarray, count: np.ndarray,
+                  offset: int = 0) -> np.ndarray:
+    """``out[i] = 0 + alpha[i, 0] * x[src[i, 0] - offset] + ...`` along ``axis`` (0 or 1) of
+    float32 ``x`` (r, c, C), in table order (OpenCV's float32 accumulation, no fused multiply-add)."""
+    n = src.shape[0]
+    shape = list(x.shape)
+    shape[axis] = n
+    acc = np.zeros(shape, np.float32)
+    for t in range(src.shape[1]):  # loop over table columns (<= ratio + 2), not texels
+        sel = np.nonzero(count > t)[0]
+        if sel.size == 0:
+            break
+        idx = src[sel, t] - offset
+        a = alpha[sel, t]
+        if axis == 0:
+            acc[sel] += np.take(x, idx, axis=0) * a[:, None, None]
+        else:
+            acc[:, sel] += np.take(x, idx, axis=1) * a[None, :, None]
+    return acc
+
+
+def _horizontal_area(band: np.ndarray, w: int) -> np.ndarray:
+    """OpenCV's horizontal INTER_AREA pass of float32 rows ``(r, W, C)`` to width ``w`` (float32)."""
+    rows, width = band.shape[:2]
+    if width == w:
+        return band
+    if width % w:  # fractional: cv2's generic path (vertical scale 1: each row copied, weight 1)
+        return cv2.resize(band, (w, rows), interpolation=cv2.INTER_AREA).reshape(rows, w, band.shape[2])
+    return _weighted_sum(band, 1, *_area_table(width, w))
+
+
+def _level_from_source0(src: np.ndarray, to_work, size: tuple[int, int]) -> np.ndarray:
+    """``_resize_area(to_work(src), size)`` computed over bands of rows of ``src``: the working
+    copy of ``src`` is never held whole. ``to_work`` maps rows of ``src`` to the working array
+    (uint16 or float32, (r, W, C)), row by row."""
+    height, width = src.shape[:2]
+    w, h = size
+    if height % h == 0 and width % w == 0:  # integer ratios: bands aligned to the vertical ratio
+        ry = height // h
+        rows = max(ry, (_BAND_TEXELS // max(1, width)) // ry * ry)
+        out = None
+        for r0 in range(0, height, rows):  # loop over bands of rows, not texels
+            part = _resize_area(to_work(src[r0:r0 + rows]), (w, min(rows, height - r0) // ry))
+            if out is None:
+                out = np.empty((h, w, part.shape[2]), part.dtype)
+            out[r0 // ry:r0 // ry + part.shape[0]] = part
+        return out
+    ysrc, yalpha, ycount = _area_table(height, h)
+    last = ysrc[np.arange(h), ycount - 1]  # each output row's last source row (ascending)
+    per = max(1, int(_BAND_TEXELS // max(1, width) * h // height))  # output rows per band
+    out = None
+    for i0 in range(0, h, per):  # loop over bands of output rows, not texels
+        i1 = min(h, i0 + per)
+        lo, hi = int(ysrc[i0, 0]), int(last[i1 - 1]) + 1
+        work = to_work(src[lo:hi])
+        horiz = _horizontal_area(work.astype(np.float32, copy=False), w)
+        part = _weighted_sum(horiz, 0, ysrc[i0:i1], yalpha[i0:i1], ycount[i0:i1], offset=lo)
+        if out is None:
+            out = np.empty((h, w, part.shape[2]), work.dtype)
+        if work.dtype == np.uint16:  # OpenCV's saturate_cast<ushort>(float): round half to even, clamp
+            np.clip(np.rint(part), 0, 65535, out=part)
+        out[i0:i1] = part
+    return out
+
+
+def _levels_from_source0(src: np.ndarray, to_work, sizes: list[tuple[int, int]]) -> list[np.ndarray]:
+    """``[_level_from_source0(src, to_work, size) for size in sizes]``, the same arrays, with one
+    conversion of ``src`` for all the levels it can serve: integer ratios (bands aligned to
+    every ratio) and fractional levels whose horizontal pass over all rows of ``src`` is small
+    (float32, at most 1/8 of ``src``'s bytes; the vertical sum then runs on it whole). The others
+    (a fractional level 1 of an odd-width source) take their own banded pass."""
+    height, width = src.shape[:2]
+    base_rows = max(1, _BAND_TEXELS // max(1, width))
+    integer = [i for i, (w, h) in enumerate(sizes) if height % h == 0 and width % w == 0]
+    step = math.lcm(*(height // sizes[i][1] for i in integer)) if integer else 1
+    if step > 4 * base_rows:
+        integer, step = [], 1
+    small = max(src.nbytes // 8, _GATHER_MIN_BYTES)
+    gathered = [i for i, (w, h) in enumerate(sizes) if i not in integer and (height % h or width % w)
+                and height * w * 16 <= small]
+    outs: list[np.ndarray | None] = [None] * len(sizes)
+    if integer or gathered:
+        rows = max(step, base_rows // step * step)
+        horiz: dict[int, np.ndarray] = {}
+        for r0 in range(0, height, rows):  # loop over bands of rows, not texels
+            work = to_work(src[r0:r0 + rows])
+            count = work.shape[0]
+            for i in integer:
+                w, h = sizes[i]
+                ry = height // h
+                part = _resize_area(work, (w, count // ry))
+                if outs[i] is None:
+                    outs[i] = np.empty((h, w, part.shape[2]), part.dtype)
+                outs[i][r0 // ry:r0 // ry + part.shape[0]] = part
+            if gathered:
+                work32 = work.astype(np.float32, copy=False)
+                for i in gathered:
+                    part = _horizontal_area(work32, sizes[i][0])
+                    if i not in horiz:
+                        horiz[i] = np.empty((height,) + part.shape[1:], np.float32)
+                    horiz[i][r0:r0 + count] = part
+        for i in gathered:
+            w, h = sizes[i]
+            part = _weighted_sum(horiz.pop(i), 0, *_area_table(height, h))
+            if work.dtype == np.uint16:  # as in _level_from_source0
+                np.clip(np.rint(part), 0, 65535, out=part)
+            outs[i] = part.astype(work.dtype, copy=False)
+    for i, size in enumerate(sizes):
+        if outs[i] is None:
+            outs[i] = _level_from_source0(src, to_work, size)
+    return outs
+
+
+def _chain_dropping(src: np.ndarray, to_work, sizes: list[tuple[int, int]], first: int) -> list[np.ndarray | None]:
+    """``_chain(to_work(src), sizes)`` for levels ``first`` (>= 1) and below, ``None`` above:
+    the same arrays, computed without ``to_work(src)`` whole (see above). Dropped levels other
+    than level 0 are computed only when a kept level is filtered from them, and freed after."""
+    n = len(sizes)
+    source = {k: _source_index(sizes, k) for k in range(1, n)}
+    needed = set(range(first, n))
+    for k in range(n - 1, 0, -1):
+        if k in needed and source[k]:
+            needed.add(source[k])
+    last_use = {source[k]: k for k in sorted(needed) if source[k]}
+    works: list[np.ndarray | None] = [None] * n
+    from0 = [k for k in sorted(needed) if source[k] == 0]
+    for k, work in zip(from0, _levels_from_source0(src, to_work, [sizes[k] for k in from0])):
+        works[k] = work
+    for k in sorted(needed):
+        j = source[k]
+        if j == 0:
+            continue
+        works[k] = _resize_area(works[j], sizes[k])
+        if 0 < j < first and last_use[j] == k:
+            works[j] = None
+    return works
+
+
 # ----------------------------------------------------------------------------- role filters
 
 def _linear_means(levels8: list[np.ndarray], srgb: bool, mean0: np.ndarray | None = None) -> list[np.ndarray]:
@@ -226,6 +416,7 @@ def _premultiplied_means(levels8: list[np.ndarray], srgb: bool) -> list[np.ndarr
 
 
 _BAND_TEXELS = 1 << 20  # level-0 texels converted per band (8 MiB of uint16 RGBA)
+_GATHER_MIN_BYTES = 1 << 24  # a fractional level's horizontal pass is kept whole up to max(this, source/8)
 
 
 def _first_level_banded(rgba: np.ndarray, lut: np.ndarray, size1: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -248,8 +439,13 @@ def _first_level_banded(rgba: np.ndarray, lut: np.ndarray, size1: tuple[int, int
     return work1, total / (h0 * w0 * 257.0)
 
 
-def _colour_chain(rgba: np.ndarray, srgb: bool, sizes, opaque: bool) -> tuple[list[np.ndarray], np.ndarray]:
-    """Levels and level 0's linear mean per channel (in 1/255 units)."""
+def _colour_chain(rgba: np.ndarray, srgb: bool, sizes, opaque: bool,
+                  first: int = 0) -> tuple[list[np.ndarray | None], np.ndarray | None]:
+    """Levels and level 0's linear mean per channel (in 1/255 units). ``first`` > 0: levels
+    above it are dropped (``None``; no mean), level 0's 16-bit copy is never made whole."""
+    if first:
+        works = _chain_dropping(rgba, lambda band: _to_work16(band, srgb), sizes, first)
+        return [None] * first + [_encode_work16(w, srgb, opaque) for w in works[first:]], None
     if rgba.dtype == np.uint8:
         level0 = rgba.view()  # shared, read-only view of the caller's array
     else:
@@ -270,28 +466,47 @@ def _colour_chain(rgba: np.ndarray, srgb: bool, sizes, opaque: bool) -> tuple[li
     return [level0] + [_encode_work16(w, srgb, opaque) for w in works[1:]], mean0
 
 
-def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str,
-                         alpha_cutoff: float) -> tuple[list[np.ndarray], tuple[float, ...] | None]:
-    """Alpha-weighted colour filtering (float32), alpha linear, optional coverage scaling."""
-    w16 = _to_work16(rgba, srgb)
+def _premultiply(w16: np.ndarray) -> np.ndarray:
+    """uint16 working RGBA (h, w, 4) -> float32 linear (R*A, G*A, B*A, A), alpha in [0, 1]."""
     lin = w16.astype(np.float32) * np.float32(1.0 / 65535.0)  # (H, W, 4) linear, alpha in [0, 1]
     a = lin[..., 3:4]
     pre = np.empty_like(lin)
     np.multiply(lin[..., :3], a, out=pre[..., :3])
     pre[..., 3:4] = a
-    pres = _chain(pre, sizes)          # premultiplied colour + alpha
-    straights = _chain(w16[..., :3].copy(), sizes)  # unweighted colour for fully transparent texels
+    return pre
 
-    level0 = rgba.view() if rgba.dtype == np.uint8 else _u16_to_u8(rgba)
+
+def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str, alpha_cutoff: float,
+                         first: int = 0) -> tuple[list[np.ndarray | None], tuple[float | None, ...] | None]:
+    """Alpha-weighted colour filtering (float32), alpha linear, optional coverage scaling.
+    ``first`` > 0: levels above it are dropped (``None``), level 0's working copies (float32
+    and 16-bit) are never made whole."""
+    if first:
+        pres = _chain_dropping(rgba, lambda band: _premultiply(_to_work16(band, srgb)), sizes, first)
+        straights = _chain_dropping(rgba, lambda band: _to_work16(band, srgb)[..., :3].copy(), sizes, first)
+        alpha0 = rgba[..., 3] if rgba.dtype == np.uint8 else _u16_to_u8(np.ascontiguousarray(rgba[..., 3]))
+        level0 = None
+    else:
+        w16 = _to_work16(rgba, srgb)
+        pres = _chain(_premultiply(w16), sizes)          # premultiplied colour + alpha
+        straights = _chain(w16[..., :3].copy(), sizes)  # unweighted colour for fully transparent texels
+        level0 = rgba.view() if rgba.dtype == np.uint8 else _u16_to_u8(rgba)
+        alpha0 = level0[..., 3]
+
     cutoff8 = None
-    coverage: list[float] | None = None
+    coverage: list[float | None] | None = None
     target = 0.0
     if alpha_mode == "MASK":
         cutoff8 = _cutoff_threshold8(alpha_cutoff)
-        target = float(np.count_nonzero(level0[..., 3] >= cutoff8)) / level0[..., 3].size
+        target = float(np.count_nonzero(alpha0 >= cutoff8)) / alpha0.size
         coverage = [target]
-    out = [level0]
+    out: list[np.ndarray | None] = [level0]
     for pre_k, straight_k in zip(pres[1:], straights[1:]):
+        if pre_k is None:  # dropped
+            out.append(None)
+            if coverage is not None:
+                coverage.append(None)
+            continue
         alpha = pre_k[..., 3]
         empty = alpha <= (0.5 / 65535.0)
         colour = np.divide(pre_k[..., :3], alpha[..., None], out=np.zeros(alpha.shape + (3,), np.float32),
@@ -344,24 +559,32 @@ def _scale_alpha_for_coverage(alpha: np.ndarray, target: float, cutoff8: int) ->
     return alpha * np.float32(s)
 
 
-def normal_unit_levels(rgba: np.ndarray) -> list[np.ndarray]:
+def normal_unit_levels(rgba: np.ndarray, first: int = 0) -> list[np.ndarray | None]:
     """The renormalised vectors of every level of a normal map, before 8-bit quantisation.
 
     ``rgba``: ``(H, W, 4)`` uint8 or uint16; returns ``[(h, w, 4) float32, ...]``, xyz unit
     length (a zero mean becomes +Z), w = linear alpha in [0, 1]. :func:`build_mip_chain`
-    stores ``rint((xyz + 1) * 127.5)``.
+    stores ``rint((xyz + 1) * 127.5)``. ``first`` > 0: levels above it are ``None`` (dropped;
+    the same values below, computed without level 0's float32 vectors whole).
     """
     height, width = rgba.shape[:2]
-    if rgba.dtype == np.uint8:
-        table = np.arange(256, dtype=np.float32) * np.float32(2.0 / 255.0) - np.float32(1.0)
-        vec = cv2.LUT(rgba, np.stack([table, table, table, np.arange(256, dtype=np.float32) / 255.0],
-                                     axis=-1).reshape(1, 256, 4))
-    else:
-        vec = rgba.astype(np.float32) * np.float32(1.0 / 65535.0)
-        vec[..., :3] = vec[..., :3] * 2.0 - 1.0
     # The unnormalised means are carried down the chain (the exact area average of level 0's
     # vectors); each level is normalised only for output.
-    return [_unit(w) for w in _chain(vec, mip_sizes(width, height))]
+    if first:
+        works = _chain_dropping(rgba, _normal_vectors, mip_sizes(width, height), first)
+        return [None] * first + [_unit(w) for w in works[first:]]
+    return [_unit(w) for w in _chain(_normal_vectors(rgba), mip_sizes(width, height))]
+
+
+def _normal_vectors(rgba: np.ndarray) -> np.ndarray:
+    """Encoded normal texels (h, w, 4) uint8/uint16 -> float32 (x, y, z, alpha) in [-1, 1] / [0, 1]."""
+    if rgba.dtype == np.uint8:
+        table = np.arange(256, dtype=np.float32) * np.float32(2.0 / 255.0) - np.float32(1.0)
+        return cv2.LUT(rgba, np.stack([table, table, table, np.arange(256, dtype=np.float32) / 255.0],
+                                      axis=-1).reshape(1, 256, 4))
+    vec = rgba.astype(np.float32) * np.float32(1.0 / 65535.0)
+    vec[..., :3] = vec[..., :3] * 2.0 - 1.0
+    return vec
 
 
 def _unit(w: np.ndarray) -> np.ndarray:
@@ -406,27 +629,30 @@ def build_mip_chain(rgba: np.ndarray, role: str, alpha_mode: str = "OPAQUE", alp
     rgba = np.ascontiguousarray(rgba)
     srgb = role in SRGB_ROLES
     sizes = mip_sizes(width, height)
+    # top levels dropped for max_size: never filtered whole (only the levels kept, and the
+    # levels they are filtered from, are computed; see _chain_dropping)
+    dropped = 0
+    if options.max_size is not None:
+        while dropped < len(sizes) - 1 and max(sizes[dropped]) > options.max_size:
+            dropped += 1
 
     alpha_weighted = False
     coverage = None
     mean0 = None
     if role == ROLE_NORMAL:
-        levels = [_encode_normals(u) for u in normal_unit_levels(rgba)]
+        levels = [None if u is None else _encode_normals(u) for u in normal_unit_levels(rgba, dropped)]
     else:
         has_alpha = _any_alpha_below_max(rgba)
         if role == ROLE_BASE_COLOR and has_alpha:
             alpha_weighted = True
-            levels, coverage = _premultiplied_chain(rgba, srgb, sizes, alpha_mode, alpha_cutoff)
+            levels, coverage = _premultiplied_chain(rgba, srgb, sizes, alpha_mode, alpha_cutoff, dropped)
         else:  # opaque colour, emissive, metallicRoughness, occlusion
-            levels, mean0 = _colour_chain(rgba, srgb, sizes, opaque=not has_alpha)
+            levels, mean0 = _colour_chain(rgba, srgb, sizes, opaque=not has_alpha, first=dropped)
     if role == ROLE_BASE_COLOR and alpha_mode == "MASK" and coverage is None:
         # fully opaque texture: every texel passes at every level
         coverage = tuple(1.0 if alpha_cutoff <= 1.0 else 0.0 for _ in levels)
 
-    dropped = 0
-    if options.max_size is not None:
-        while dropped < len(levels) - 1 and max(levels[dropped].shape[:2]) > options.max_size:
-            dropped += 1
+    if dropped:
         levels = levels[dropped:]
         if coverage is not None:
             coverage = coverage[dropped:]

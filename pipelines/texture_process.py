@@ -22,7 +22,7 @@ from assetpipe.core.errors import InvalidTextureError
 from assetpipe.core.ktx2 import (SUPERCOMPRESSION_NONE, SUPERCOMPRESSION_ZSTD, VK_FORMAT_R8G8B8A8_SRGB,
                                  VK_FORMAT_R8G8B8A8_UNORM, write_ktx2)
 from assetpipe.pipelines.model import ImageSource
-from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255
+from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255, image_size
 from assetpipe.pipelines.texture_mips import build_mip_chain
 from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
 
@@ -50,6 +50,8 @@ class ProcessedTexture:
     energy-conservation figure (filtering itself is an exact area average, checked in the
     tests against a float64 reference at <= 0.5 mean absolute error per level).
     ``coverage``: per level, alpha-test coverage for baseColor with alphaMode MASK, else None.
+    ``warnings``: one line when levels were dropped for ``max_size`` (the image, its size, the
+    size built), else empty.
     """
 
     ktx2: bytes
@@ -67,6 +69,7 @@ class ProcessedTexture:
     coverage: tuple[float, ...] | None
     source_width: int
     source_height: int
+    warnings: tuple[str, ...] = ()
 
     @property
     def color_space(self) -> str:
@@ -92,8 +95,17 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
                     options: TextureOptions = DEFAULT_TEXTURE_OPTIONS) -> ProcessedTexture:
     """Decode ``image``, build its mip chain for ``role`` and encode KTX2 + level 0.
 
-    Raises :class:`InvalidTextureError` for undecodable or too large images.
+    Raises :class:`InvalidTextureError` for undecodable or too large images, and, with
+    ``options.oversize == "refuse"``, for an image larger than ``options.max_size`` (read from
+    its header, before decoding).
     """
+    if options.oversize == "refuse" and options.max_size is not None:
+        size = image_size(image)
+        if size is not None and max(size) > options.max_size:
+            raise InvalidTextureError(
+                image.origin or image.name,
+                f"image {image.name!r} is {size[0]}x{size[1]}: larger than the maximum texture size {options.max_size} "
+                "(refused: oversize textures are set to refuse; --max-texture-size raises the limit)")
     rgba = decode_image(image, max_pixels=options.max_pixels)
     source_h, source_w = rgba.shape[:2]
     alpha_below = has_alpha_below_255(rgba)
@@ -115,8 +127,13 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
     except ValueError as exc:  # pragma: no cover - the chain is built to fit
         raise InvalidTextureError(image.origin, f"cannot write KTX2: {exc}") from None
 
+    warnings: tuple[str, ...] = ()
     if chain.dropped_levels:
         level0, ext, shared = encode_png(chain.levels[0]), ".png", False
+        warnings = (f"{image.origin or image.name}: image {image.name!r} is {source_w}x{source_h}, larger than the "
+                    f"maximum texture size {options.max_size}: built at {chain.width}x{chain.height} "
+                    f"({chain.dropped_levels} top mip level(s) dropped; --max-texture-size 0 keeps the full size, "
+                    "--oversize-textures refuse refuses such images)",)
     elif image.mime in _KEEP_AS_IS:
         level0, ext, shared = image.data, _KEEP_AS_IS[image.mime], True
     else:  # TGA, BMP, GIF, WebP: stb_image-friendly PNG of the decoded source
@@ -128,4 +145,4 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
         width=chain.width, height=chain.height, levels=len(chain.levels), vk_format=vk_format,
         srgb=chain.srgb, has_alpha_below_255=alpha_below, alpha_weighted=chain.alpha_weighted,
         mean_drift=chain.mean_drift, coverage=chain.coverage,
-        source_width=source_w, source_height=source_h)
+        source_width=source_w, source_height=source_h, warnings=warnings)

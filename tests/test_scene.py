@@ -429,14 +429,16 @@ def test_texture_size_from_screen_size_and_budget():
     small = plan_scene([town], opts, TextureOptions(max_size=256))
     assert small.models[town.objects[2].key].texture_max_size == 256
     assert small.models[town.objects[1].key].texture_options_for().max_size == 256
-    # the seed scene has no budget and no sizes: unbounded
+    # the seed scene has no budget and no sizes: only the build's cap (8192 by default, #13)
     seed = load_scene(SCENES / "seed.scene.json")
+    cap = TextureOptions().max_size
     sp = plan_scene([seed])
-    assert all(m.texture_max_size is None for m in sp.models.values())
-    assert sp.object_texture_size(SCENES / "monkey" / "monkey.png") is None
+    assert all(m.texture_max_size == cap for m in sp.models.values())
+    assert sp.object_texture_size(SCENES / "monkey" / "monkey.png") == cap
+    assert all(m.texture_max_size is None for m in plan_scene([seed], opts, TextureOptions(max_size=None)).models.values())
     # across scenes the larger need wins (the texture is shared)
     both = plan_scene([seed, town])
-    assert both.object_texture_size(SCENES / "monkey" / "monkey.png") is None
+    assert both.object_texture_size(SCENES / "monkey" / "monkey.png") == cap
     assert plan.object_texture_size(SCENES / "monkey" / "monkey.png") == 1024
     key = town.objects[3].key
     assert plan.object_texture_size(SCENES / "monkey" / "monkey.png", {key: 1.0}) == next_pow2(

@@ -314,3 +314,105 @@ def test_png_roundtrip_helper_sanity():
     buf = io.BytesIO()
     Image.fromarray(np.zeros((2, 2, 4), np.uint8)).save(buf, "PNG")
     assert corpus_rgba(io.BytesIO(buf.getvalue())).shape == (2, 2, 4)
+
+
+# ----------------------------------------------------------------------------- dropped levels (#13)
+
+@pytest.mark.parametrize("h,w,max_size,gather", [(300, 1000, 256, 0), (211, 211, 100, 1), (257, 1000, 300, 0),
+                                                 (1000, 257, 60, 1), (384, 999, 128, 1), (7, 600, 100, 0),
+                                                 (600, 3, 40, 1), (97, 61, 1, 0)])
+def test_dropped_levels_equal_the_full_chains_levels_for_every_role(h, w, max_size, gather, monkeypatch):
+    # The chain without its top levels is computed from bands of rows of the source (the
+    # working copy of level 0 never whole); it must be the full chain's levels byte for byte:
+    # integer and fractional ratios from level 0 (211 -> 105, 1000 -> 62 wide, 257 rows),
+    # a 1-row level, 8- and 16-bit sources, every filter. Bands of 8192 texels: many bands,
+    # band edges inside footprints. gather=0: only fractional levels narrower than 1/32 of the
+    # source keep their horizontal pass whole, the others are summed band by band.
+    from assetpipe.pipelines import texture_mips
+
+    monkeypatch.setattr(texture_mips, "_BAND_TEXELS", 8192)
+    if not gather:
+        monkeypatch.setattr(texture_mips, "_GATHER_MIN_BYTES", 0)
+    rng = np.random.default_rng(h * 7 + w)
+    rgba8 = rng.integers(0, 256, (h, w, 4), dtype=np.uint8)
+    opaque8 = rgba8.copy()
+    opaque8[..., 3] = 255
+    rgba16 = rng.integers(0, 65536, (h, w, 4), dtype=np.uint16)
+    cases = [(rgba8, ROLE_BASE_COLOR, "BLEND"), (rgba8, ROLE_BASE_COLOR, "MASK"), (opaque8, ROLE_BASE_COLOR, "OPAQUE"),
+             (opaque8, ROLE_EMISSIVE, "OPAQUE"), (rgba8, ROLE_OCCLUSION, "OPAQUE"), (rgba8, ROLE_NORMAL, "OPAQUE"),
+             (rgba16, ROLE_BASE_COLOR, "BLEND"), (rgba16, ROLE_METALLIC_ROUGHNESS, "OPAQUE"),
+             (rgba16, ROLE_NORMAL, "OPAQUE")]
+    for src, role, mode in cases:
+        full = build_mip_chain(src, role, mode, 0.4)
+        cut = build_mip_chain(src, role, mode, 0.4, options=TextureOptions(max_size=max_size))
+        d = cut.dropped_levels
+        assert d >= 1 and max(cut.levels[0].shape[:2]) <= max_size < max(full.levels[d - 1].shape[:2])
+        assert len(cut.levels) == len(full.levels) - d
+        for k, (a, b) in enumerate(zip(cut.levels, full.levels[d:])):
+            assert a.shape == b.shape and (a == b).all(), (role, mode, src.dtype, k + d)
+        assert cut.coverage == (None if full.coverage is None else full.coverage[d:])
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.float32])
+@pytest.mark.parametrize("src_hw,dst_wh", [((257, 120), (60, 128)), ((120, 257), (128, 60)), ((211, 211), (105, 105)),
+                                           ((1000, 9), (3, 62)), ((64, 64), (16, 16))])
+def test_level_from_bands_equals_opencv_inter_area(dtype, src_hw, dst_wh, monkeypatch):
+    # OpenCV's INTER_AREA replayed over bands: integer ratio on one axis and fractional on the
+    # other (where OpenCV's generic path runs, not its integer fast path), both fractional,
+    # both integer; 3 and 4 channels. Equal bit for bit, not within a tolerance.
+    import cv2
+
+    from assetpipe.pipelines import texture_mips
+
+    monkeypatch.setattr(texture_mips, "_BAND_TEXELS", 1000)
+    rng = np.random.default_rng(11)
+    for channels in (3, 4):
+        if dtype == np.uint16:
+            src = rng.integers(0, 65536, src_hw + (channels,), dtype=np.uint16)
+        else:
+            src = rng.random(src_hw + (channels,), dtype=np.float32) * 2 - 1
+        ref = cv2.resize(src, dst_wh, interpolation=cv2.INTER_AREA)
+        got = texture_mips._level_from_source0(src, lambda band: band.copy(), dst_wh)
+        assert got.dtype == ref.dtype and got.shape == ref.shape and (got == ref).all(), (channels, src_hw, dst_wh)
+
+
+_MIPS_PEAK_SCRIPT = """
+import sys
+from pathlib import Path
+import numpy as np
+from assetpipe.pipelines.texture_mips import TextureOptions, build_mip_chain
+def hwm():
+    return next(int(l.split()[1]) * 1024 for l in open("/proc/self/status") if l.startswith("VmHWM"))
+n, cap = int(sys.argv[1]), int(sys.argv[2])
+rgba = np.empty((n, n, 4), np.uint8)
+rgba[...] = np.random.default_rng(0).integers(0, 256, (n, 1, 4), dtype=np.uint8)
+rgba[..., 3] = 255
+Path("/proc/self/clear_refs").write_text("5")  # reset the peak RSS (Linux >= 4.0)
+before = hwm()
+chain = build_mip_chain(rgba, sys.argv[3], options=TextureOptions(max_size=cap))
+print(before, hwm(), chain.levels[0].shape[0])
+"""
+
+
+@pytest.mark.parametrize("role", [ROLE_BASE_COLOR, ROLE_NORMAL])
+def test_dropping_levels_never_makes_a_working_copy_of_the_full_image(role):
+    # 6000^2 capped at 2048: levels 0 and 1 dropped; 187^2, 93^2 and 46^2 are filtered from
+    # level 0 with fractional ratios. Measured growth of the peak RSS in build_mip_chain over
+    # the RGBA8 source (a fresh process, peak reset after the source is made): 2.97x before
+    # (the 16-bit copy of level 0 is 2x, level 1 0.5x more), 0.66x now (baseColor).
+    import os
+    import subprocess
+    import sys
+
+    n, cap = 6000, 2048
+    out = subprocess.run([sys.executable, "-c", _MIPS_PEAK_SCRIPT, str(n), str(cap), role], capture_output=True,
+                         text=True, check=True, env=os.environ)
+    before, after, size = map(int, out.stdout.split())
+    assert size == 1500
+    rgba = n * n * 4
+    # What may be held now: dropped level 1 in its working form (3000^2: 16-bit colour 0.5x,
+    # float32 normals 1.0x), kept level 2 (1/4 of that), the 8-bit kept levels (1/16 x 4/3),
+    # bands of 2^20 texels in float32 (16 MiB, a few at once). A full-size working copy of
+    # level 0 alone is 2x (16-bit) or 4x (float32).
+    working = (3000 * 3000 * (8 if role != ROLE_NORMAL else 16)) * 1.25
+    assert after - before <= working + rgba / 12 + 64 * 2**20, (after - before) / rgba

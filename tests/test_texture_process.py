@@ -222,3 +222,141 @@ def test_corpus_use_finder_sees_embedded_images(corpus):
     assert glb and all(u[0].mime in ("image/png", "image/jpeg") for u in glb)
     res = process_texture(*embedded[0])
     check(res, embedded[0][1])
+
+
+# -- the default maximum texture size and the oversize policy (#13) ---------------------------
+
+def _png(width: int, height: int) -> bytes:
+    import cv2
+
+    img = np.zeros((height, width, 3), np.uint8)
+    img[:, ::2] = (200, 40, 10)  # a simple pattern: compresses small
+    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    return buf.tobytes()
+
+
+def test_default_max_size_drops_top_levels_of_an_oversize_image_with_one_warning() -> None:
+    from assetpipe.pipelines.texture_options import DEFAULT_MAX_TEXTURE_SIZE
+
+    assert TextureOptions().max_size == DEFAULT_MAX_TEXTURE_SIZE == 8192
+    res = process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR)
+    assert (res.width, res.height, res.source_width) == (4100, 1, 8200)
+    assert res.warnings == ("/models/wide.png: image 'wide.png' is 8200x2, larger than the maximum texture size 8192: "
+                            "built at 4100x1 (1 top mip level(s) dropped; --max-texture-size 0 keeps the full size, "
+                            "--oversize-textures refuse refuses such images)",)
+    full = process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR, options=TextureOptions(max_size=None))
+    assert (full.width, full.height, full.warnings) == (8200, 2, ())
+    fits = process_texture(source(_png(8192, 2), "fits.png"), ROLE_BASE_COLOR)
+    assert (fits.width, fits.warnings) == (8192, ())
+
+
+def test_refuse_policy_refuses_an_oversize_image_from_its_header() -> None:
+    refuse = TextureOptions(oversize="refuse")
+    with pytest.raises(InvalidTextureError, match=r"wide\.png: image 'wide\.png' is 8200x2: larger than the maximum "
+                                                  r"texture size 8192 \(refused"):
+        process_texture(source(_png(8200, 2), "wide.png"), ROLE_BASE_COLOR, options=refuse)
+    # a JPEG's size comes from Pillow's header read
+    jpeg = encoded(np.zeros((4, 8300, 3), np.uint8), "JPEG")
+    with pytest.raises(InvalidTextureError, match=r"is 8300x4: larger than the maximum texture size 8192"):
+        process_texture(source(jpeg, "wide.jpg"), ROLE_BASE_COLOR, options=refuse)
+    # before decoding: a header claiming 9000x9000 over no pixel data is refused for its size,
+    # where decoding would have found it truncated
+    bomb = _png(1, 1)
+    bomb = bomb[:16] + struct.pack(">II", 9000, 9000) + bomb[24:]
+    with pytest.raises(InvalidTextureError, match="is 9000x9000: larger than the maximum texture size 8192"):
+        process_texture(source(bomb, "bomb.png"), ROLE_BASE_COLOR, options=refuse)
+    with pytest.raises(InvalidTextureError, match="corrupt"):
+        process_texture(source(bomb, "bomb.png"), ROLE_BASE_COLOR)
+    # within the size, refuse changes nothing
+    ok = process_texture(source(_png(64, 8), "ok.png"), ROLE_BASE_COLOR, options=refuse)
+    assert (ok.width, ok.warnings) == (64, ())
+    with pytest.raises(ValueError, match="oversize must be one of downscale, refuse"):
+        TextureOptions(oversize="shrink")
+
+
+_PEAK_SCRIPT = """
+import resource, sys
+from pathlib import Path
+from assetpipe.pipelines.model import ImageSource
+from assetpipe.pipelines.texture_options import TextureOptions
+from assetpipe.pipelines.texture_decode import decode_image
+from assetpipe.pipelines.texture_process import process_texture
+data = Path(sys.argv[1]).read_bytes()
+src = ImageSource(name="big.png", data=data, mime="image/png", origin="big.png", digest="x")
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+if sys.argv[2] == "decode":
+    shape = decode_image(src).shape
+else:
+    options = TextureOptions(max_size=int(sys.argv[3])) if len(sys.argv) > 3 else TextureOptions()
+    shape = process_texture(src, "baseColor", options=options).ktx2 and (0,)
+print(before * 1024, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+"""
+
+
+def _peak_bytes(png: Path, what: str, max_size: int | None = None) -> int:
+    """The growth of a fresh process's peak RSS while it decodes / processes ``png`` (with
+    ``TextureOptions(max_size=max_size)`` when given)."""
+    import os
+    import subprocess
+    import sys
+
+    extra = [str(max_size)] if max_size is not None else []
+    out = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT, str(png), what, *extra], capture_output=True, text=True,
+                         check=True, env=os.environ)
+    before, after = map(int, out.stdout.split())
+    return after - before
+
+
+def test_decoding_does_not_copy_the_whole_image_again(tmp_path: Path) -> None:
+    # A 12000x12000 RGB PNG of 440 KB peaked at 2.2 GiB in decode_image: Pillow's image, its
+    # whole RGBA conversion, that conversion's bytes and our array. Converted in 4 MiB bands
+    # into our array, the growth of the peak measured 1.3x the RGBA size (4000^2 and 12000^2),
+    # against 2.9x (4000^2) and 2.0x (12000^2) converted whole.
+    n = 4000
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(n, n))
+    rgba = n * n * 4
+    grown = _peak_bytes(png, "decode")
+    # 1.75x: between the two, with room for allocator noise; a band's copies (crop, convert,
+    # bytes, array) are 16 MiB at most
+    assert grown <= 1.75 * rgba + 16 * 2**20, (grown / rgba)
+
+
+def test_an_oversize_texture_peaks_no_higher_than_its_decoding(tmp_path: Path) -> None:
+    # 6000x6000 capped at 2048 (built at 1500x1500; levels 0 and 1 dropped). The mip chain used
+    # to make a 16-bit copy of the full-size level 0 (2x the RGBA) before dropping levels:
+    # process_texture's peak grew 4.0x the decoded RGBA against decoding's 2.1x. Now the kept
+    # levels come from bands of the 8-bit source: measured 2.13x, decoding's own peak (the mip
+    # step adds 0.7x over the RGBA it holds, below that peak).
+    n = 6000
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(n, n))
+    rgba = n * n * 4
+    decoding = _peak_bytes(png, "decode")
+    grown = _peak_bytes(png, "process", max_size=2048)
+    # the bound: the higher of decoding's peak and the RGBA held plus the mip step's working
+    # set (dropped level 1 in 16 bits 0.5x, level 2 0.125x, 8-bit levels and the KTX2 < 0.1x,
+    # bands 16 MiB each), plus 0.1x for allocator noise
+    bound = max(decoding, rgba * (1 + 0.5 + 0.125 + 0.1) + 32 * 2**20) + 0.1 * rgba
+    assert grown <= bound, (grown / rgba, decoding / rgba)
+
+
+@pytest.mark.bench
+def test_a_12000_square_png_builds_at_6000_within_bounded_memory(tmp_path: Path) -> None:
+    import time
+
+    png = tmp_path / "big.png"
+    png.write_bytes(_png(12000, 12000))
+    t0 = time.perf_counter()
+    grown = _peak_bytes(png, "process")
+    seconds = time.perf_counter() - t0
+    rgba = 12000 * 12000 * 4
+    print(f"12000x12000 PNG ({png.stat().st_size} bytes): peak RSS grew {grown / 2**30:.2f} GiB "
+          f"({grown / rgba:.2f}x the decoded RGBA), {seconds:.1f} s")
+    # the peak was the mip chain's 16-bit copy of the full-size level 0 (made before the top level
+    # was dropped): measured 3.2x the decoded RGBA (1.72 GiB). The kept levels now come from bands
+    # of the 8-bit source (pipelines/texture_mips.py, _chain_dropping): measured 1.24x in this
+    # test (2.03x in a plain fresh process, /usr/bin/time: decoding's own peak). After decoding
+    # the step holds the RGBA (1x), level 1 in 16 bits (0.5x), the 8-bit levels and the KTX2
+    # (0.33x each): 2.2x; 2.5x leaves room for allocator noise
+    assert grown <= 2.5 * rgba, grown / rgba
