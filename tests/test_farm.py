@@ -58,9 +58,9 @@ def _farm_build(models, tmp: Path, name: str, scheduler, cache=None):
 
 
 def test_farm_build_equals_local_build_and_a_second_machine_hits_the_shared_cache(cluster, models, local_build,
-                                                                                  tmp_path):
+                                                                                  s3_server, tmp_path):
     ref, n_steps = local_build
-    shared = (tmp_path / "shared").as_uri()
+    shared = s3_server.url(f"farm-{tmp_path.name}")  # the S3 server of tests/conftest.py
     report, ex, store = _farm_build(models, tmp_path, "m1", cluster.scheduler_address, shared)
     assert tree(tmp_path / "m1-out") == ref
     assert ex.moved["tasks"] == n_steps and all(s["ran"] for r in report.results for s in r.steps)
