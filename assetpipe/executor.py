@@ -39,6 +39,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
 import uuid
 from pathlib import Path
 
@@ -189,7 +190,8 @@ class DaskExecutor:
         self.client = None
         self._own_client = False
         # bytes sent with tasks (inputs) and returned (outputs), and tasks run
-        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0}
+        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0,
+                      "client_s": 0.0}  # client_s: reading inputs and submitting, fetching, checking and storing results
         self.per_step: dict[str, dict] = {}  # task name -> {"tasks", "to_workers", "from_workers", "seconds"}
 
     def _connect(self):
@@ -234,6 +236,7 @@ class DaskExecutor:
                 i, (fn, _root, *args) = next(pending)
             except StopIteration:
                 return False
+            t0 = time.perf_counter()
             args = _absolute(fn, args)
             inputs = {}
             for d in dict.fromkeys(input_blobs(fn, args)):
@@ -246,12 +249,14 @@ class DaskExecutor:
                                   key=f"{fn.__name__}-{uuid.uuid4().hex}")
             running[f.key] = (i, fn, sum(len(b) for b in inputs.values()))
             done.add(f)
+            self.moved["client_s"] += time.perf_counter() - t0
             return True
 
         for _ in range(window):
             if not submit_next():
                 break
         for f in done:
+            t0 = time.perf_counter()
             i, fn, size = running.pop(f.key)
             try:
                 status, value, secs, blobs = f.result()
@@ -278,6 +283,7 @@ class DaskExecutor:
             st["from_workers"] += back
             st["seconds"] += secs
             results[i] = (status, value, secs)
+            self.moved["client_s"] += time.perf_counter() - t0
             submit_next()
         return results
 
