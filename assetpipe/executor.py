@@ -189,9 +189,9 @@ class DaskExecutor:
         self.timeout = timeout
         self.client = None
         self._own_client = False
-        # bytes sent with tasks (inputs) and returned (outputs), and tasks run
-        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0,
-                      "client_s": 0.0}  # client_s: reading inputs and submitting, fetching, checking and storing results
+        # bytes sent with tasks (inputs) and returned (outputs), tasks run, and the client's own
+        # seconds (reading inputs and submitting; fetching, checking and storing results)
+        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0, "client_s": 0.0}
         self.per_step: dict[str, dict] = {}  # task name -> {"tasks", "to_workers", "from_workers", "seconds"}
 
     def _connect(self):
