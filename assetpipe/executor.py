@@ -27,7 +27,7 @@ Dask's nanny starts worker processes with ``MALLOC_TRIM_THRESHOLD_=65536``
 every array above 128 KiB is then a fresh mmap, zero-filled page by page and unmapped when
 freed. The LOD step (many short-lived arrays of a few MB) took 10x the page faults and 1.6x
 the CPU time that way. :func:`step_malloc` gives a worker back the allocator settings a local
-build process runs with (see docs/FARM.md, "Where the time went").
+build process runs with (docs/FARM.md, "The seam's overhead: where the time went").
 
 A worker killed mid-step is Dask's business: the scheduler reschedules its tasks on the
 others (``distributed.scheduler.allowed-failures``, default 3); the steps are pure, so the
@@ -111,8 +111,8 @@ def _absolute(fn, args: list) -> list:
 
 # glibc's mallopt parameters (<malloc.h>) and the values step_malloc sets
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
-# the ceiling of glibc's adaptive mmap threshold on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX), where a
-# local build process's threshold ends up once it has freed arrays of a few MB ...
+# the ceiling of glibc's adaptive mmap threshold on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX): in a
+# local build process the threshold rises to the largest array freed so far, up to this ...
 STEP_MMAP_THRESHOLD = 32 * 2**20
 # ... and its trim threshold, which glibc keeps at twice the mmap threshold as it adapts
 STEP_TRIM_THRESHOLD = 2 * STEP_MMAP_THRESHOLD
@@ -122,7 +122,7 @@ _malloc_done: str | None = None
 def step_malloc() -> str:
     """In a worker process: undo a fixed ``MALLOC_*_`` setting from the environment (Dask's
     ``MALLOC_TRIM_THRESHOLD_=65536``), once. glibc cannot switch its adaptive thresholds back
-    on, so this sets the values they settle at in a local build process. Returns what it did."""
+    on, so this sets the ceiling they rise toward in a local build process. Returns what it did."""
     global _malloc_done
     if _malloc_done is not None:
         return _malloc_done
