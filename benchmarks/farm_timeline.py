@@ -1,17 +1,19 @@
 """Where the farm's time goes: a per-task timeline of one local ``-j 2`` build and one build
 on a 2-worker LocalCluster, side by side (issue #15, the seam's overhead).
 
-    .venv/bin/python benchmarks/farm_timeline.py [--quick | MODEL ...] [--json FILE]
+    .venv/bin/python benchmarks/farm_timeline.py [MODEL ...] [--json FILE]
         [--order local,farm,farm-dask-malloc]
 
+MODEL: folder names under ``$ASSETPIPE_CORPUS/models`` (default: the six of ``farm.py --quick``).
 Every task records, in the process that runs it: wall start and stop (``time.time()``, one
-clock for every process of the machine), the process CPU seconds it used (all threads:
-``time.process_time()``), the process's thread count (``/proc/self/task``), the
-``OMP/MKL/OPENBLAS_NUM_THREADS`` it saw. The farm's tasks also record the time spent around
-the step on the worker (scratch store in and out). The client records when it submitted each
-task and when it had stored its result. The report gives, per executor: the phases (first
-submit to last result), the CPU/wall ratio of the steps (above 1: the step used more than one
-core), the idle core-seconds, and the order the LOD tasks started in.
+clock for every process of the machine), the CPU and system seconds and minor page faults of
+that process while it ran (``time.process_time()``, ``os.times()``, ``getrusage``: all its
+threads), its thread count (``/proc/self/task``) and the ``OMP/MKL/OPENBLAS_NUM_THREADS`` it
+saw. On a Dask worker the time around the step (version check, scratch store in and out) is
+recorded too. The report gives, per build: one line per task on its process's lane, the totals
+(busy seconds, CPU and system seconds, faults), the idle core-seconds, the time around the
+steps on the workers, the order the LOD tasks started in and their CPU/wall ratio (above 1: a
+step used more than one core). The outputs of the builds are compared.
 
 Kinds of build (``--order``, default ``local,farm,farm-dask-malloc``): ``local`` (``jobs=2``),
 ``farm`` (the executor as it is), ``farm-dask-malloc`` (the same, with the workers' allocator
@@ -160,7 +162,6 @@ def summarise(kind: str, rows: list[dict], t0: float, t1: float, cores: int) -> 
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("models", nargs="*")
-    ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--order", default="local,farm,farm-dask-malloc")
     args = ap.parse_args()
