@@ -22,6 +22,13 @@ Two executors exist:
   library versions differ from the client's refuses the step (its output would be stored
   under the client's key), so a mixed farm fails loudly instead of poisoning the cache.
 
+Dask's nanny starts worker processes with ``MALLOC_TRIM_THRESHOLD_=65536``
+(``distributed.nanny.pre-spawn-environ``). Setting it turns off glibc's adaptive mmap threshold:
+every array above 128 KiB is then a fresh mmap, zero-filled page by page and unmapped when
+freed. The LOD step (many short-lived arrays of a few MB) took 10x the page faults and 1.6x
+the CPU time that way. :func:`step_malloc` gives a worker back the allocator settings a local
+build process runs with (docs/FARM.md, "The seam's overhead: where the time went").
+
 A worker killed mid-step is Dask's business: the scheduler reschedules its tasks on the
 others (``distributed.scheduler.allowed-failures``, default 3); the steps are pure, so the
 outputs are byte-identical to a local build.
@@ -32,6 +39,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
 import uuid
 from pathlib import Path
 
@@ -101,12 +109,48 @@ def _absolute(fn, args: list) -> list:
     return args
 
 
+# glibc's mallopt parameters (<malloc.h>) and the values step_malloc sets
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+# the ceiling of glibc's adaptive mmap threshold on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX): in a
+# local build process the threshold rises to the largest array freed so far, up to this ...
+STEP_MMAP_THRESHOLD = 32 * 2**20
+# ... and its trim threshold, which glibc keeps at twice the mmap threshold as it adapts
+STEP_TRIM_THRESHOLD = 2 * STEP_MMAP_THRESHOLD
+_malloc_done: str | None = None
+
+
+def step_malloc() -> str:
+    """In a worker process: undo a fixed ``MALLOC_*_`` setting from the environment (Dask's
+    ``MALLOC_TRIM_THRESHOLD_=65536``), once. glibc cannot switch its adaptive thresholds back
+    on, so this sets the ceiling they rise toward in a local build process. Returns what it did."""
+    global _malloc_done
+    if _malloc_done is not None:
+        return _malloc_done
+    fixed = sorted(k for k in os.environ if k.startswith("MALLOC_") and k.endswith("_THRESHOLD_"))
+    if not fixed:
+        _malloc_done = "glibc defaults (adaptive)"
+        return _malloc_done
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        ok = libc.mallopt(M_MMAP_THRESHOLD, STEP_MMAP_THRESHOLD) == 1 and \
+            libc.mallopt(M_TRIM_THRESHOLD, STEP_TRIM_THRESHOLD) == 1
+    except (OSError, AttributeError):  # not glibc: its allocator does not read MALLOC_*_ either
+        ok = False
+    _malloc_done = (f"{', '.join(fixed)} in the environment; mmap threshold {STEP_MMAP_THRESHOLD >> 20} MiB, "
+                    f"trim threshold {STEP_TRIM_THRESHOLD >> 20} MiB" if ok else
+                    f"{', '.join(fixed)} in the environment; left as is (no glibc mallopt)")
+    return _malloc_done
+
+
 def run_on_worker(fn, args: list, inputs: dict[str, bytes], fingerprint: str):
     """On a worker: run one task against a scratch store holding ``inputs``.
 
     Returns (status, value, seconds, {digest: bytes} of the blobs the record names)."""
     from assetpipe.cache.store import Store
 
+    step_malloc()
     mine = environment_fingerprint()
     if mine != fingerprint:
         return ("internal", f"worker {os.uname().nodename} pid {os.getpid()} runs a different assetpipe or "
@@ -145,8 +189,9 @@ class DaskExecutor:
         self.timeout = timeout
         self.client = None
         self._own_client = False
-        # bytes sent with tasks (inputs) and returned (outputs), and tasks run
-        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0}
+        # bytes sent with tasks (inputs) and returned (outputs), tasks run, and the client's own
+        # seconds (reading inputs and submitting; fetching, checking and storing results)
+        self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0, "client_s": 0.0}
         self.per_step: dict[str, dict] = {}  # task name -> {"tasks", "to_workers", "from_workers", "seconds"}
 
     def _connect(self):
@@ -191,6 +236,7 @@ class DaskExecutor:
                 i, (fn, _root, *args) = next(pending)
             except StopIteration:
                 return False
+            t0 = time.perf_counter()
             args = _absolute(fn, args)
             inputs = {}
             for d in dict.fromkeys(input_blobs(fn, args)):
@@ -203,12 +249,14 @@ class DaskExecutor:
                                   key=f"{fn.__name__}-{uuid.uuid4().hex}")
             running[f.key] = (i, fn, sum(len(b) for b in inputs.values()))
             done.add(f)
+            self.moved["client_s"] += time.perf_counter() - t0
             return True
 
         for _ in range(window):
             if not submit_next():
                 break
         for f in done:
+            t0 = time.perf_counter()
             i, fn, size = running.pop(f.key)
             try:
                 status, value, secs, blobs = f.result()
@@ -235,6 +283,7 @@ class DaskExecutor:
             st["from_workers"] += back
             st["seconds"] += secs
             results[i] = (status, value, secs)
+            self.moved["client_s"] += time.perf_counter() - t0
             submit_next()
         return results
 

@@ -68,3 +68,15 @@ def _isolated_cache(tmp_path_factory):
         os.environ.pop("ASSETPIPE_CACHE", None)
     else:
         os.environ["ASSETPIPE_CACHE"] = old
+
+
+@pytest.fixture(scope="session")
+def s3_server():
+    """One real S3-compatible server for the session (moto's server mode, its own process on
+    127.0.0.1 at a free port, one bucket; tests/farm_fixtures.py), stopped at the end. While it
+    runs, the AWS_* variables in os.environ point botocore at it. Tests use their own prefixes."""
+    from farm_fixtures import S3Server
+
+    server = S3Server()
+    yield server
+    server.stop()

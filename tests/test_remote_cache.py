@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from farm_fixtures import S3Server, free_port, make_model, tree
+from farm_fixtures import free_port, make_model, tree
 
 from assetpipe.build import run_build
 from assetpipe.cache.remote import TieredStore, open_store
@@ -25,10 +25,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def s3():
-    server = S3Server()
-    yield server
-    server.stop()
+def s3(s3_server):
+    return s3_server  # tests/conftest.py: one moto server for the session
 
 
 @pytest.fixture(scope="module")
