@@ -10,7 +10,7 @@ MESH = 3  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 po
 LOD = 6  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
-TEXTURE = 2  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression
+TEXTURE = 3  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
 
