@@ -109,7 +109,7 @@ def _bc7_params():
     # metric); uber level 0 (etcpak's default). Mode 1 tries 8 of the 64 partitions instead of
     # all: on the 29 corpus colour level 0s 0.57x the CPU time for 1.0 dB lower mean PSNR
     # (55.8 -> 54.8 dB) and worst 40.05 dB instead of 40.28 (SpiderTex.jpg; goal 38); 16
-    # partitions: 0.72x, worst 40.22; 4: 0.51x, worst 39.90 (benchmarks/textures.py --bc7-sweep).
+    # partitions: 0.72x, worst 40.22; 4: 0.51x, worst 39.90 (benchmarks/textures.py, section 5).
     p.init_linear_weights()
     p.m_max_partitions = BC7_MAX_PARTITIONS
     return p
@@ -151,9 +151,10 @@ def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     padded = pad_to_blocks(level)
     ph, pw = padded.shape[:2]
     # etcpak holds the GIL while it encodes (a thread running it lets no Python run), so
-    # threads over strips of a level gain nothing: one call per level, the array passed as a
-    # buffer (no copy). Levels of many textures run in parallel in the build's worker processes.
-    data = _encoder(fmt.vk_format)(padded, pw, ph)
+    # threads over strips of a level gain nothing: one call per level; levels of many textures
+    # run in parallel in the build's worker processes. Always a copy (tobytes): etcpak's ETC2
+    # RGBA encoder writes into its input buffer (an array passed as a buffer came back changed).
+    data = _encoder(fmt.vk_format)(padded.tobytes(), pw, ph)
     shape = (ph // 4, pw // 4, fmt.block_bytes)
     out = np.frombuffer(data, dtype=np.uint8)
     if out.size != shape[0] * shape[1] * shape[2]:  # pragma: no cover - the library's contract

@@ -380,3 +380,17 @@ def test_cli_option(tmp_path):
     assert tex["vkFormat"] == img.vk_format == 148 and img.supercompression == 2
     r = CliRunner().invoke(main, ["build", "x.gltf", "--texture-compression", "astc"])
     assert r.exit_code == 2 and "'astc' is not one of 'none', 'bc', 'etc2'" in r.output
+
+
+@pytest.mark.parametrize("codec, role, alpha", [("etc2", ROLE_BASE_COLOR, True), ("etc2", ROLE_BASE_COLOR, False),
+                                                ("bc", ROLE_BASE_COLOR, True), ("etc2", ROLE_NORMAL, False)])
+def test_compressing_leaves_the_level_unchanged(codec, role, alpha):
+    """etcpak's ETC2 RGBA encoder writes into the buffer it is given: the chain's level (the
+    reference of every check, and the source of later steps) must come back as it was."""
+    rng = np.random.default_rng(7)
+    level = rng.integers(0, 256, (64, 64, 4), dtype=np.uint8)
+    if not alpha:
+        level[..., 3] = 255
+    before = level.copy()
+    compress_level(level, choose_format(codec, role, srgb=role == ROLE_BASE_COLOR, has_alpha=alpha))
+    np.testing.assert_array_equal(level, before)
