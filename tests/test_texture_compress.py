@@ -394,3 +394,13 @@ def test_compressing_leaves_the_level_unchanged(codec, role, alpha):
     before = level.copy()
     compress_level(level, choose_format(codec, role, srgb=role == ROLE_BASE_COLOR, has_alpha=alpha))
     np.testing.assert_array_equal(level, before)
+
+
+def test_eac_r11_blocks_are_the_red_half_of_eac_rg11():
+    """EAC R11 comes from etcpak's compress_eac_r, whose buffer holds the R11 blocks in its first
+    half: they must be the R halves of EAC RG11's blocks of the same texels (block order too)."""
+    level = np.random.default_rng(3).integers(0, 256, (36, 72, 4), dtype=np.uint8)
+    r11 = compress_level(level, BLOCK_FORMATS[153])
+    rg11 = compress_level(level, BLOCK_FORMATS[155])
+    assert r11.shape == (9, 18, 8)
+    np.testing.assert_array_equal(r11, rg11[..., :8])
