@@ -75,7 +75,8 @@ def _paths(inputs: PathLike | Iterable[PathLike]) -> list[Path]:
 
 def build(inputs: PathLike | Iterable[PathLike], out: PathLike, *, options: BuildOptions | None = None,
           mesh: MeshOptions | None = None, lod: Any = _KEEP, texture: TextureOptions | None = None,
-          jobs: int | None = None, cache_dir: PathLike | None = None) -> BuildReport:
+          jobs: int | None = None, cache_dir: PathLike | None = None,
+          texture_compression: str | None = None) -> BuildReport:
     """Build ``inputs`` (model files, folders searched recursively, scene ``*.json`` files) into ``out``.
 
     ``options`` (default :data:`assetpipe.options.DEFAULT_BUILD_OPTIONS`, the CLI's defaults);
@@ -83,6 +84,9 @@ def build(inputs: PathLike | Iterable[PathLike], out: PathLike, *, options: Buil
     that part of it. ``jobs``: worker processes (default: the usable CPU count). ``cache_dir``:
     as ``--cache`` (default ``$ASSETPIPE_CACHE``, else the user's cache folder). Returns the
     report; ``report.failed`` lists the assets that did not build, each with its one-line error.
+    ``texture_compression``: ``"none"``, ``"bc"`` or ``"etc2"`` (``--texture-compression``) for
+    the texture options given (or the defaults); a scene's own ``texture_compression`` still wins
+    for the textures it uses.
     """
     opts = options if options is not None else DEFAULT_BUILD_OPTIONS
     if not isinstance(opts, BuildOptions):
@@ -96,6 +100,8 @@ def build(inputs: PathLike | Iterable[PathLike], out: PathLike, *, options: Buil
         changes["lod"] = lod
     if texture is not None:
         changes["texture"] = texture
+    if texture_compression is not None:
+        changes["texture"] = dataclasses.replace(changes.get("texture", opts.texture), compression=texture_compression)
     if changes:
         opts = dataclasses.replace(opts, **changes)
     n = usable_cpus() if jobs is None else int(jobs)

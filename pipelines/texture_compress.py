@@ -96,14 +96,22 @@ def pad_to_blocks(level: np.ndarray) -> np.ndarray:
     return np.pad(level, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge")
 
 
+BC7_MAX_PARTITIONS = 8
+"""Mode-1 partitions etcpak's BC7 encoder tries (0..64); see :func:`_bc7_params`."""
+
+
 def _bc7_params():
     import etcpak  # noqa: PLC0415
 
     p = etcpak.BC7CompressBlockParams()
     # Plain RGB error weights instead of etcpak's perceptual default ([128, 64, 16, 32], YCbCr):
     # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
-    # metric); uber level 0, 64 partitions (etcpak defaults). Measured: benchmarks/textures.py.
+    # metric); uber level 0 (etcpak's default). Mode 1 tries 8 of the 64 partitions instead of
+    # all: on the 29 corpus colour level 0s 0.57x the CPU time for 1.0 dB lower mean PSNR
+    # (55.8 -> 54.8 dB) and worst 40.05 dB instead of 40.28 (SpiderTex.jpg; goal 38); 16
+    # partitions: 0.72x, worst 40.22; 4: 0.51x, worst 39.90 (benchmarks/textures.py, section 5).
     p.init_linear_weights()
+    p.m_max_partitions = BC7_MAX_PARTITIONS
     return p
 
 
@@ -126,37 +134,13 @@ def _encoder(vk_format: int):
 
 
 def _eac_r11(data: bytes, w: int, h: int) -> bytes:
-    """EAC R11 blocks: the R half of etcpak's EAC RG11 blocks (an RG11 block is an R11 block
-    followed by a G11 block). etcpak 0.9.15's own ``compress_eac_r`` writes 16 bytes per block
-    with rows out of place (seen decoding a gradient), so it is not used."""
+    """EAC R11 blocks from etcpak's ``compress_eac_r``. etcpak 0.9.15's binding returns a
+    buffer of 16 bytes per block of which the first half holds the 8-byte R11 blocks in order
+    (byte-identical to the R half of ``compress_eac_rg``'s blocks, at half its time: 0.28 s vs
+    0.57 s CPU on 1024x1024); the rest is not written by the encoder and is dropped."""
     import etcpak  # noqa: PLC0415
 
-    rg = np.frombuffer(etcpak.compress_eac_rg(data, w, h), dtype=np.uint8).reshape(-1, 16)
-    return np.ascontiguousarray(rg[:, :8]).tobytes()
-
-
-_STRIP_TEXELS = 1 << 18  # levels above this many texels are split into strips (256 K texels each)
-_POOL = None
-
-
-def _pool():
-    """Threads for strips (etcpak releases the GIL while encoding)."""
-    global _POOL
-    if _POOL is None:
-        import os  # noqa: PLC0415
-        from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
-
-        _POOL = ThreadPoolExecutor(max_workers=max(1, len(os.sched_getaffinity(0))),
-                                   thread_name_prefix="texture-compress")
-    return _POOL
-
-
-def _strips(ph: int, pw: int) -> list[tuple[int, int]]:
-    """Row ranges (multiples of 4) of about ``_STRIP_TEXELS`` each covering ``ph`` rows."""
-    if ph * pw <= _STRIP_TEXELS:
-        return [(0, ph)]
-    rows = max(4, (_STRIP_TEXELS // pw) // 4 * 4)
-    return [(y, min(ph, y + rows)) for y in range(0, ph, rows)]
+    return etcpak.compress_eac_r(data, w, h)[: w * h // 2]
 
 
 def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
@@ -166,12 +150,11 @@ def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     h, w = level.shape[:2]
     padded = pad_to_blocks(level)
     ph, pw = padded.shape[:2]
-    encode = _encoder(fmt.vk_format)
-    strips = _strips(ph, pw)
-    if len(strips) == 1:
-        data = encode(padded.tobytes(), pw, ph)
-    else:  # blocks are independent: strips of block rows give the same bytes, on every core
-        data = b"".join(_pool().map(lambda r: encode(padded[r[0]:r[1]].tobytes(), pw, r[1] - r[0]), strips))
+    # etcpak holds the GIL while it encodes (a thread running it lets no Python run), so
+    # threads over strips of a level gain nothing: one call per level; levels of many textures
+    # run in parallel in the build's worker processes. Always a copy (tobytes): etcpak's ETC2
+    # RGBA encoder writes into its input buffer (an array passed as a buffer came back changed).
+    data = _encoder(fmt.vk_format)(padded.tobytes(), pw, ph)
     shape = (ph // 4, pw // 4, fmt.block_bytes)
     out = np.frombuffer(data, dtype=np.uint8)
     if out.size != shape[0] * shape[1] * shape[2]:  # pragma: no cover - the library's contract

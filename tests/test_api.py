@@ -148,3 +148,14 @@ def test_validate_renders_the_built_models(built):
     assert sorted(r.id for r in results) == ["ball", "crate", "pyramid"]
     assert all(r.passed for r in results), [(r.id, r.error, [c.messages for c in r.checks if not c.passed])
                                             for r in results]
+
+
+def test_build_takes_the_texture_compression(tmp_path):
+    crate = Path(__file__).resolve().parents[1] / "examples/crate/crate.gltf"
+    r = assetpipe.build(crate, tmp_path / "out", lod=None, texture_compression="etc2", jobs=1,
+                        cache_dir=tmp_path / "cache")
+    assert not r.failed
+    tex = json.loads((tmp_path / "out/crate.asset.json").read_text())["materials"][0]["textures"]["baseColor"]
+    assert tex["vkFormat"] == 148  # ETC2 RGB8 sRGB: the crate's base colour is opaque
+    with pytest.raises(ValueError, match="texture compression must be one of none, bc, etc2, not 'astc'"):
+        assetpipe.build(crate, tmp_path / "out2", texture_compression="astc", cache_dir=tmp_path / "cache")

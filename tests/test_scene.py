@@ -193,6 +193,8 @@ def test_errors_name_scene_object_and_problem(tmp_path, obj, fragments):
     ('{"scene": {"objects": [], "ambient_light": [1, NaN, 1]}}', "scene.ambient_light[1]: must be finite"),
     ('{"scene": {"objects": [], "texture_budget": 0}}', "scene.texture_budget: must be a whole number"),
     ('{"scene": {"objects": [], "texture_budget": 10.5}}', "scene.texture_budget"),
+    ('{"scene": {"objects": [], "texture_compression": "astc"}}',
+     'scene.texture_compression: must be one of none, bc, etc2, not "astc"'),
     ('{"scene": {"objects": [{"model": {"name": "plane.obj"}, "model": {"name": "plane.obj"}}]}}',
      "object 0: duplicate key 'model'"),
     ('{"scene": {"objects": [{"model": {"name": "plane.obj"}, '

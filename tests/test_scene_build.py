@@ -226,3 +226,50 @@ def test_a_recentred_model_carries_its_offset_into_the_scene(tmp_path):
     assert model["positionOffset"] == center
     # the written positions are local: within the sphere's radius of 0
     assert max(abs(v) for v in side["bounds"]["max"] + side["bounds"]["min"]) <= 1.0 + 1e-6
+
+
+def _crate_textures(out: Path, model_id: str = "crate") -> dict:
+    side = json.loads((out / f"{model_id}.asset.json").read_text())
+    return side["materials"][0]["textures"]
+
+
+def test_a_scene_asks_for_compressed_textures_of_what_it_uses(tmp_path):
+    """``texture_compression`` in a scene: its model's textures and its objects' own textures
+    are BC (vkFormat 146, BC7 sRGB for base colour) while the build's default stays ``none``;
+    the scene's texture budget caps the chain before compression (only 32x32 and below are
+    encoded), and a model no scene uses is not built at all."""
+    crate_dir = Path(__file__).resolve().parents[1] / "examples/crate"
+    shutil.copytree(crate_dir, tmp_path / "crate")
+    shutil.copy(crate_dir / "crate.png", tmp_path / "own.png")
+    scene = write_scene(tmp_path / "s.json", [{"model": {"name": str(tmp_path / "crate/crate.gltf"),
+                                                         "lod": {"generate": False}},
+                                               "texture": str(tmp_path / "own.png")}],
+                        texture_budget=32, texture_compression="bc")
+    assert DEFAULT_BUILD_OPTIONS.texture.compression == "none"
+    r = build(tmp_path, scene)
+    assert not r.failed, r.failed
+    tex = _crate_textures(tmp_path / "out")["baseColor"]
+    assert tex["vkFormat"] == 146 and (tex["width"], tex["levels"]) == (32, 6)
+    k = read_ktx2((tmp_path / "out" / tex["ktx2"]).read_bytes())
+    assert (k.vk_format, k.width, len(k.levels)) == (146, 32, 6)
+    assert [lv.shape for lv in k.levels][:2] == [(8, 8, 16), (4, 4, 16)]  # 32x32 and 16x16 in 4x4 blocks
+    own = json.loads((tmp_path / "out/s.scene.json").read_text())["objects"][0]["texture"]
+    k = read_ktx2((tmp_path / "out" / own["ktx2"]).read_bytes())
+    assert (k.vk_format, k.width) == (146, 32)
+
+    # the same model built without the scene keeps the build's default: RGBA8
+    r = run_build([tmp_path / "crate/crate.gltf"], tmp_path / "plain", DEFAULT_BUILD_OPTIONS,
+                  cache_dir=tmp_path / "cache")
+    assert not r.failed
+    tex = _crate_textures(tmp_path / "plain")["baseColor"]
+    assert tex["vkFormat"] == 43 and tex["width"] == 256
+
+
+def test_scenes_that_disagree_on_a_models_codec_fail_with_one_line(tmp_path):
+    crate = Path(__file__).resolve().parents[1] / "examples/crate/crate.gltf"
+    a = write_scene(tmp_path / "a.json", [{"model": {"name": str(crate)}}], texture_compression="bc")
+    b = write_scene(tmp_path / "b.json", [{"model": {"name": str(crate)}}], texture_compression="etc2")
+    r = build(tmp_path, a, b)
+    assert r.failed
+    assert "scenes ask for different texture_compression (bc in scene a object 0, etc2 in scene b object 0)" \
+        in r.failed[0].error

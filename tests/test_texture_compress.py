@@ -380,3 +380,27 @@ def test_cli_option(tmp_path):
     assert tex["vkFormat"] == img.vk_format == 148 and img.supercompression == 2
     r = CliRunner().invoke(main, ["build", "x.gltf", "--texture-compression", "astc"])
     assert r.exit_code == 2 and "'astc' is not one of 'none', 'bc', 'etc2'" in r.output
+
+
+@pytest.mark.parametrize("codec, role, alpha", [("etc2", ROLE_BASE_COLOR, True), ("etc2", ROLE_BASE_COLOR, False),
+                                                ("bc", ROLE_BASE_COLOR, True), ("etc2", ROLE_NORMAL, False)])
+def test_compressing_leaves_the_level_unchanged(codec, role, alpha):
+    """etcpak's ETC2 RGBA encoder writes into the buffer it is given: the chain's level (the
+    reference of every check, and the source of later steps) must come back as it was."""
+    rng = np.random.default_rng(7)
+    level = rng.integers(0, 256, (64, 64, 4), dtype=np.uint8)
+    if not alpha:
+        level[..., 3] = 255
+    before = level.copy()
+    compress_level(level, choose_format(codec, role, srgb=role == ROLE_BASE_COLOR, has_alpha=alpha))
+    np.testing.assert_array_equal(level, before)
+
+
+def test_eac_r11_blocks_are_the_red_half_of_eac_rg11():
+    """EAC R11 comes from etcpak's compress_eac_r, whose buffer holds the R11 blocks in its first
+    half: they must be the R halves of EAC RG11's blocks of the same texels (block order too)."""
+    level = np.random.default_rng(3).integers(0, 256, (36, 72, 4), dtype=np.uint8)
+    r11 = compress_level(level, BLOCK_FORMATS[153])
+    rg11 = compress_level(level, BLOCK_FORMATS[155])
+    assert r11.shape == (9, 18, 8)
+    np.testing.assert_array_equal(r11, rg11[..., :8])
