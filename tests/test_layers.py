@@ -98,7 +98,7 @@ def test_the_graph_reader_sees_imports():
     assert "assetpipe.renderer.checks.base" in graph["assetpipe.renderer.checks.textures"]
     assert "assetpipe.renderer.loader" in graph["assetpipe.renderer.checks.textures"]  # ``from ..loader``
     assert "assetpipe.renderer.checks" in graph["assetpipe.renderer.validate"]
-    assert "assetpipe.core.ktx2" in graph["assetpipe.renderer.checks.roles"]
+    assert "assetpipe.renderer.checks.ktx2_levels" in graph["assetpipe.renderer.checks.roles"]
 
 
 def test_no_import_runs_up_the_layers():

@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from ..loader import read_ktx2
 from ..results import CheckResult
 from .base import Check, Context
 from .images import decode_rgba
+from .ktx2_levels import open_ktx2
 from .textures import SRGB_TO_LINEAR, VK_SRGB, linear_to_srgb_code
 
 ROLE_PX = 64
@@ -89,22 +89,31 @@ def _image_bytes(doc: dict[str, Any], blob: bytes | None, root: Path, tex_index:
     return data[o:o + int(view["byteLength"])]
 
 
+# 8-bit code -> 16-bit value tables for cv2.LUT: linear (code * 257) and sRGB decoded to linear.
+# Area-averaging 16-bit values rounds each mean to 1/65535 (0.004 of an 8-bit code), 1500x below
+# role_tolerance; cv2 averages 16-bit images about 10x faster than float32 ones (no float copy
+# of a 2048^2 image: 0.04 s instead of 0.4 s measured on Avocado's textures).
+_LINEAR16 = np.tile((np.arange(256) * 257).astype(np.uint16).reshape(256, 1), (1, 3)).reshape(1, 256, 3)
+_SRGB16 = np.tile(np.rint(SRGB_TO_LINEAR.astype(np.float64) * 65535).astype(np.uint16).reshape(256, 1),
+                  (1, 3)).reshape(1, 256, 3)
+
+
 def _reduce(rgba: np.ndarray, size: tuple[int, int], role: str, fmt: int) -> np.ndarray:
-    """The source image area-averaged to ``size`` (w, h) the way the mip chain filters ``role``; RGB codes."""
+    """The source image area-averaged to ``size`` (w, h) the way the mip chain filters ``role``; RGB codes
+    (float, 0..255): sRGB roles averaged in linear light, normals averaged as vectors and renormalised."""
     import cv2  # noqa: PLC0415
 
-    rgb = np.ascontiguousarray(rgba[..., :3])
-    if role == "normal":
-        table = (np.arange(256, dtype=np.float32) * np.float32(2 / 255) - 1).reshape(256, 1)
-        n = cv2.LUT(rgb, np.repeat(table, 3, axis=1).reshape(1, 256, 3))
-        m = cv2.resize(n, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3)
+    rgb = cv2.cvtColor(np.ascontiguousarray(rgba), cv2.COLOR_RGBA2RGB)
+    table = _SRGB16 if (role != "normal" and fmt == VK_SRGB) else _LINEAR16
+    avg = cv2.resize(cv2.LUT(rgb, table), size, interpolation=cv2.INTER_AREA)
+    avg = avg.reshape(size[1], size[0], 3).astype(np.float32) / np.float32(65535.0)
+    if role == "normal":  # the mean of 2c/255 - 1 is 2 mean(c)/255 - 1: average codes, then map
+        m = avg * 2 - 1
         m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
         return (m + 1) * 127.5
     if fmt == VK_SRGB:
-        lin = cv2.LUT(rgb, np.repeat(SRGB_TO_LINEAR.reshape(256, 1), 3, axis=1).reshape(1, 256, 3))
-        return linear_to_srgb_code(cv2.resize(lin, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 3))
-    return cv2.resize(rgba[..., :3].astype(np.float32), size, interpolation=cv2.INTER_AREA).reshape(
-        size[1], size[0], 3)
+        return linear_to_srgb_code(avg)
+    return avg * 255.0
 
 
 class RolesCheck(Check):
@@ -168,17 +177,12 @@ class RolesCheck(Check):
                     continue
                 try:
                     with ctx.timer("compare"):
-                        ktx = read_ktx2((model.root / tex["ktx2"]).read_bytes())
-                        w, h = int(ktx.width), int(ktx.height)
-                        count = len(ktx.levels)
-                        k = next((i for i in range(count) if max(w >> i, h >> i) <= ROLE_PX), count - 1)
-                        lv = np.asarray(ktx.levels[k])
+                        ktx = open_ktx2(model.root / tex["ktx2"], ctx.cache)
+                        k = ktx.nearest(ROLE_PX)
+                        lv = ktx.level(k)
                         n, tol = 3, ctx.options.role_tolerance
-                        if ktx.block_format is not None:  # BC / ETC2: decoded, compared over the stored channels
-                            from assetpipe.core.ktx2 import decode_level, stored_channels  # noqa: PLC0415
-
-                            lv = decode_level(lv, int(ktx.vk_format), max(w >> k, 1), max(h >> k, 1))
-                            n = min(3, len(stored_channels(int(ktx.vk_format))))
+                        if ktx.block is not None:  # BC / ETC2: compared over the stored channels
+                            n = min(3, ktx.stored)
                             # plus the encoders' own error, as the textures check allows for level 0
                             tol += ctx.options.texture_compressed_png_tolerance - ctx.options.texture_png_tolerance
                         rgba = decode_rgba(raw, ctx.cache)

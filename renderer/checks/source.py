@@ -56,7 +56,7 @@ def load_source(ctx: Context) -> tuple[Path | None, Any, str | None]:
         else:
             try:
                 with ctx.timer("load"):
-                    ctx.cache["source"] = (src, load_source_model(src), None)
+                    ctx.cache["source"] = (src, load_source_model(src, decoded=ctx.cache), None)
             except AssetpipeError as exc:
                 ctx.cache["source"] = (src, None, f"source not importable by trimesh: {exc}")
     return ctx.cache["source"]
