@@ -10,7 +10,8 @@ Usage::
 
 Models are built once with ``assetpipe build`` into a temporary directory (models that fail
 to build are listed and left out). Validation runs in ``-j`` renderer subprocesses (device
-set-up once each, charged to its first model), 256x256, validation layer and every check on.
+set-up once each, before its first model, printed on its own line), 256x256, validation layer and
+every check on.
 Prints per-model time, its average and maximum, and the wall time. Goal: 1 s per model on
 average, 2 s at most. ``--mutations`` applies every mutation of ``tests/validate_mutations.py``
 to every model it applies to (plus the generated assets of ``tests/validate_assets.py``) and
@@ -80,7 +81,8 @@ def main() -> int:
                 print("falling back to the fixtures")
         opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
         t0 = time.perf_counter()
-        results = validate_batch(models, opts, jobs=args.jobs)
+        stats: dict = {}
+        results = validate_batch(models, opts, jobs=args.jobs, stats=stats)
         wall = time.perf_counter() - t0
 
     cols = ("setup", "load", "upload", "render", "compare")
@@ -111,6 +113,12 @@ def main() -> int:
     print(f"{len(results)} models, -j {args.jobs}: per-model time average {sum(totals) / n:.3f} s (goal 1 s), "
           f"maximum {max(totals, default=0):.3f} s ({Path(results[worst].model).name if results else '-'}; "
           f"goal 2 s); wall time {wall:.2f} s ({wall / n:.3f} s per model); {sum(r.passed for r in results)} passed")
+    print("device set-up per renderer process (once, before its first model; in no model's time): "
+          + ", ".join(f"{x:.3f} s" for x in stats.get("setup", [])))
+    try:
+        print(f"load average (1, 5, 15 min) at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    except OSError:
+        pass
     for f in failed_builds:
         print(f"  not built: {f}")
     return 0
