@@ -38,6 +38,7 @@ COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
 DEPTH_FORMAT_NAME = "VK_FORMAT_D32_SFLOAT"
 LIGHT_DIR = np.array([0.4, 0.8, 0.6])  # towards the light, camera-relative (x right, y up, z back)
 
+_MODE_CODE = {"facing": 2, "shaded+facing": 3}  # the fragment shader's pc.sel.z
 _WRAP = {10497: "VK_SAMPLER_ADDRESS_MODE_REPEAT", 33071: "VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE",
          33648: "VK_SAMPLER_ADDRESS_MODE_MIRRORED_REPEAT"}
 
@@ -364,12 +365,12 @@ class Renderer:
 
         The background is transparent black (alpha 0): alpha > 0 is the coverage.
         """
-        if mode not in ("shaded", "silhouette", "coverage", "facing"):
+        if mode not in ("shaded", "silhouette", "coverage", "facing", "shaded+facing"):
             raise ValueError(f"unknown render mode {mode!r}")
         t0 = time.perf_counter()
         self.resize(camera.width, camera.height)
         vk, ctx = self.vk, self.ctx
-        silhouette = mode != "shaded"
+        silhouette = mode not in ("shaded", "shaded+facing")
         draws = self.draws(gpu, lod, meshes)
         eye = np.asarray(camera.eye, np.float64)
         opaque = [d for d in draws if silhouette or not d.blended]
@@ -416,7 +417,7 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                if mode in ("coverage", "facing"):
+                if mode in ("coverage", "facing", "shaded+facing"):
                     key = (False, False)
                 elif silhouette:
                     key = (not d.double_sided, False)
@@ -431,8 +432,8 @@ class Renderer:
                     vk.vkCmdBindDescriptorSets(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, self.pipeline_layout,
                                                0, 1, [dset], 0, None)
                     bound_set = dset
-                ints[:] = (d.material, d.tex_slot, 2 if mode == "facing" else 1 if silhouette else 0,
-                           1 if d.double_sided else 0)
+                code = _MODE_CODE.get(mode, 1 if silhouette else 0)
+                ints[:] = (d.material, d.tex_slot, code, 1 if d.double_sided else 0)
                 data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
                 vk.vkCmdPushConstants(cmd, self.pipeline_layout,
                                       vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
@@ -458,6 +459,33 @@ class Renderer:
         out = readback.read(w * h * 4).reshape(h, w, 4)
         self.timings["render"] += time.perf_counter() - t0
         return out
+
+    def one_pass(self, gpu: GpuModel) -> bool:
+        """Whether :meth:`render_pair` draws ``gpu`` in one pass: every material OPAQUE (no MASK
+        discard, no blending), so the shaded and the facing pictures share their nearest surfaces."""
+        return all(m.alpha_mode == "OPAQUE" for m in gpu.model.materials)
+
+    def render_pair(self, gpu: GpuModel, camera: Camera, lod: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(shaded, facing) renders of one view, as ``render(mode="shaded")`` and
+        ``render(mode="facing")`` give them, from one pass when :meth:`one_pass` allows.
+
+        The one pass draws without culling (as ``facing`` must) and writes the facing into alpha:
+        its shaded picture therefore shows a single-sided back face where it is the nearest
+        surface, where a culled render shows what lies behind it. For a model whose nearest
+        surfaces face the eye (what the winding comparison holds every good model to) the two
+        are the same picture; the checks compare a build with its source drawn the same way.
+        """
+        if not self.one_pass(gpu):
+            return self.render(gpu, camera, lod=lod), self.render(gpu, camera, mode="facing", lod=lod)
+        img = self.render(gpu, camera, mode="shaded+facing", lod=lod)
+        a = img[..., 3]
+        covered = a > 0
+        facing = np.zeros_like(img)
+        facing[..., 0] = np.where(a > 191, 255, np.where(covered, 188, 0))  # alpha 1.0 -> 255, 0.5 -> 128
+        facing[..., 3] = np.where(covered, 255, 0)
+        shaded = img.copy()
+        shaded[..., 3] = facing[..., 3]
+        return shaded, facing
 
     # ----------------------------------------------------------------------- teardown
     def close(self) -> None:

@@ -20,7 +20,7 @@ layout(push_constant) uniform PushConstants {
     mat4 viewProj;
     vec4 eye;
     vec4 lightDir;
-    ivec4 sel;
+    ivec4 sel;       // x material, y texture slot, z mode (0 shaded, 1 silhouette, 2 facing, 3 shaded+facing), w double-sided
 } pc;
 
 void main() {
@@ -42,4 +42,7 @@ void main() {
     if (mode != 2) base.a = 1.0;
     float diffuse = max(dot(n, normalize(pc.lightDir.xyz)), 0.0);
     outColor = vec4(base.rgb * (0.3 + 0.7 * diffuse), base.a);
+    if (pc.sel.z == 3) {            // shaded + facing in one pass (OPAQUE materials, no culling): alpha 1
+        outColor.a = (gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5;  // where the nearest surface faces the
+    }                               // eye (or is double-sided), 0.5 where a back face is nearest
 }
