@@ -7,6 +7,7 @@ Usage::
     .venv/bin/python benchmarks/validate.py --fixtures      # the renderer's hand-made fixtures only
     .venv/bin/python benchmarks/validate.py -j 2 OUT_DIR    # two renderer processes in parallel
     .venv/bin/python benchmarks/validate.py --mutations OUT_DIR   # catch rate of every mutation kind
+    .venv/bin/python benchmarks/validate.py --against /tmp/old OUT_DIR  # side by side with another tree
 
 Models are built once with ``assetpipe build`` into a temporary directory (models that fail
 to build are listed and left out). Validation runs in ``-j`` renderer subprocesses (device
@@ -15,7 +16,11 @@ every check on.
 Prints per-model time, its average and maximum, and the wall time. Goal: 1 s per model on
 average, 2 s at most. ``--mutations`` applies every mutation of ``tests/validate_mutations.py``
 to every model it applies to (plus the generated assets of ``tests/validate_assets.py``) and
-prints the catch rate per kind, and the false alarms on the unmutated models.
+prints the catch rate per kind, and the false alarms on the unmutated models. ``--against TREE``
+(a checkout of another commit, e.g. ``git archive BASE | tar -x -C /tmp/old``) validates each
+model with that tree's renderer worker and with this one's, alternately, both warm, in one run,
+and prints both times and their ratio per model (times under shared load are comparable only
+side by side).
 """
 
 from __future__ import annotations
@@ -62,9 +67,12 @@ def main() -> int:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("-j", "--jobs", type=int, default=1, help="renderer processes in parallel")
     ap.add_argument("--mutations", action="store_true", help="catch rate of every mutation kind")
+    ap.add_argument("--against", metavar="TREE", help="another checkout's renderer, side by side")
     args = ap.parse_args()
     if args.mutations:
         return mutations(args)
+    if args.against:
+        return against(args)
     failed_builds: list[str] = []
     with tempfile.TemporaryDirectory(prefix="assetpipe-bench-") as tmp:
         if args.fixtures:
@@ -121,6 +129,55 @@ def main() -> int:
         pass
     for f in failed_builds:
         print(f"  not built: {f}")
+    return 0
+
+
+def against(args: argparse.Namespace) -> int:
+    """Each model by ``args.against``'s renderer worker and by ours, alternately, in one run."""
+    from assetpipe.renderer._vk import renderer_env  # noqa: PLC0415
+    from assetpipe.renderer.worker import WorkerPool  # noqa: PLC0415
+
+    class TreePool(WorkerPool):
+        """A renderer worker running another tree's code."""
+
+        def __init__(self, options: ValidateOptions, root: str) -> None:
+            super().__init__(options)
+            self.root = root
+
+        def _start(self) -> None:
+            if self._stderr is not None:
+                self._stderr.close()
+            self._stderr = tempfile.TemporaryFile()
+            env = renderer_env()
+            env["PYTHONPATH"] = self.root
+            self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
+            self._buf = b""
+            self._ready = False
+
+    opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
+    models = find_built_models(args.paths)
+    other, ours = TreePool(opts, str(Path(args.against).resolve())), TreePool(opts, str(REPO))
+    print(f"set-up: {args.against} {other.warm() or 0:.3f} s, this tree {ours.warm() or 0:.3f} s (in no model's time)")
+    rows = []
+    try:
+        for m in models:
+            ro, rn = other.validate(m), ours.validate(m)
+            to, tn = (sum(v for k, v in r.timings.items() if k != "setup") for r in (ro, rn))
+            rows.append((Path(m).name, to, tn, ro.passed, rn.passed))
+            print(f"{Path(m).name[:34]:<34} other {to:7.3f} s  this {tn:7.3f} s  ratio {tn / max(to, 1e-9):5.2f}  "
+                  f"{'pass' if ro.passed else 'FAIL'}/{'pass' if rn.passed else 'FAIL'}", flush=True)
+    finally:
+        other.close()
+        ours.close()
+    n = max(len(rows), 1)
+    for label, i in (("other", 1), ("this", 2)):
+        ts = [r[i] for r in rows]
+        worst = max(rows, key=lambda r: r[i])[0] if rows else "-"
+        print(f"{label}: per-model average {sum(ts) / n:.3f} s, maximum {max(ts, default=0):.3f} s ({worst}); "
+              f"over 2 s: {sum(t > 2 for t in ts)}, over 1 s: {sum(t > 1 for t in ts)}; passed "
+              f"{sum(r[i + 2] for r in rows)} of {len(rows)}")
+    print(f"load average (1, 5, 15 min) at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +11,6 @@ from assetpipe.pipelines.mesh_options import MeshOptions
 from assetpipe.pipelines.mesh_process import process_mesh, tangents_from_uv
 from assetpipe.pipelines.model import MeshData
 from assetpipe.pipelines.tangents import mikktspace_tangents
-
-CORPUS = Path(os.environ.get("ASSETPIPE_CORPUS", "/work/shared/corpus")) / "models"
 
 
 def _grid(n: int = 4):
@@ -84,8 +81,7 @@ def _angles(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", t[:, :3], ref), -1.0, 1.0)))
 
 
-@pytest.mark.skipif(not (CORPUS / "Avocado").is_dir(), reason="the shared corpus is not on this machine")
-def test_matches_the_tangents_avocados_exporter_stored():
+def test_matches_the_tangents_avocados_exporter_stored(corpus: Path):
     """Avocado's TANGENT was written by a MikkTSpace exporter; measured (this port, 406 vertices):
     median 0.19 deg, 99th percentile 4.3 deg, maximum 8.5 deg, handedness 405/406 equal. The
     UV-gradient tangents we generated before: 0.49 / 10.3 / 20.0 deg, handedness 0/406. The
@@ -94,7 +90,7 @@ def test_matches_the_tangents_avocados_exporter_stored():
     between the two methods' figures: a port that degrades to UV gradients fails them."""
     from assetpipe.pipelines.import_gltf import import_gltf
 
-    mesh = import_gltf(CORPUS / "Avocado" / "glTF" / "Avocado.gltf").meshes[0]
+    mesh = import_gltf(corpus / "models" / "Avocado" / "glTF" / "Avocado.gltf").meshes[0]
     t = mikktspace_tangents(mesh.positions, mesh.indices, mesh.normals, mesh.uv0)
     ang = _angles(t, mesh.tangents)
     assert np.median(ang) < 0.3 and np.percentile(ang, 99) < 6.0 and ang.max() < 10.0, \
@@ -104,8 +100,7 @@ def test_matches_the_tangents_avocados_exporter_stored():
     assert np.percentile(_angles(old, mesh.tangents), 99) > 6.0  # the bound separates the methods
 
 
-@pytest.mark.skipif(not (CORPUS / "VertexColorTest").is_dir(), reason="the shared corpus is not on this machine")
-def test_matches_vertexcolortest_where_uvs_span_an_area():
+def test_matches_vertexcolortest_where_uvs_span_an_area(corpus: Path):
     """VertexColorTest's stored tangent directions equal ours (0 deg) on every vertex whose
     triangles have UV area; on its faces mapped to one UV point the exporter's frame is arbitrary
     (as is ours), so those vertices are left out. Handedness: 68 of 72 vertices agree; the other
@@ -114,10 +109,11 @@ def test_matches_vertexcolortest_where_uvs_span_an_area():
     and in Avocado, so the check allows those 4."""
     from assetpipe.pipelines.import_gltf import import_gltf
 
-    for mesh in import_gltf(CORPUS / "VertexColorTest" / "glTF" / "VertexColorTest.gltf").meshes:
+    for mesh in import_gltf(corpus / "models" / "VertexColorTest" / "glTF" / "VertexColorTest.gltf").meshes:
         tris = mesh.indices.astype(np.int64)
         u = mesh.uv0[tris].astype(np.float64)
-        area = (u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1]) - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0])
+        e1, e2 = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
+        area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
         flat = np.zeros(len(mesh.positions), bool)
         flat[tris[np.abs(area) < 1e-6].ravel()] = True  # float32 UVs: 1e-6 is below any real triangle's UV area here
         t = mikktspace_tangents(mesh.positions, mesh.indices, mesh.normals, mesh.uv0)
