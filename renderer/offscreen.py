@@ -38,6 +38,7 @@ COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
 DEPTH_FORMAT_NAME = "VK_FORMAT_D32_SFLOAT"
 LIGHT_DIR = np.array([0.4, 0.8, 0.6])  # towards the light, camera-relative (x right, y up, z back)
 
+VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK = 141, 155  # two-channel normals: z rebuilt
 _MODE_CODE = {"facing": 2, "shaded+facing": 3}  # the fragment shader's pc.sel.z
 _WRAP = {10497: "VK_SAMPLER_ADDRESS_MODE_REPEAT", 33071: "VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE",
          33648: "VK_SAMPLER_ADDRESS_MODE_MIRRORED_REPEAT"}
@@ -278,21 +279,32 @@ class Renderer:
             mat_rows[i, 4] = m.alpha_cutoff
             mat_rows[i, 5] = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}.get(m.alpha_mode, 0)
         mb = ctx.create_buffer(mat_rows.nbytes, vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT)
-        mb.write(mat_rows)
 
         images: list[Image] = []
         samplers: list[Any] = []
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
-        for m in model.materials:
-            if m.texture is None:
-                slots.append((0, 0))
-                continue
-            k = len(images)
-            images.append(self._upload_texture(m.texture, model.notes))
-            samplers.append(self._make_sampler(m.texture.sampler, len(m.texture.levels)))
-            slots.append((k // per_set, 1 + k % per_set))
-        n_sets = max(1, math.ceil(len(images) / per_set))
+        by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
+        for i, m in enumerate(model.materials):
+            texs = [t for t in (m.texture, m.normal_texture) if t is not None]
+            if len(by_set[-1]) + len(texs) > per_set:  # a material's textures share one set
+                by_set.append([])
+            placed = []
+            for t in texs:
+                images.append(self._upload_texture(t, model.notes))
+                samplers.append(self._make_sampler(t.sampler, len(t.levels)))
+                by_set[-1].append(len(images) - 1)
+                placed.append(len(by_set[-1]))
+            s_idx = len(by_set) - 1
+            base_slot = placed[0] if m.texture is not None else 0
+            slots.append((s_idx if m.texture is not None or m.normal_texture is not None else 0, base_slot))
+            if m.normal_texture is not None:  # the shader reads the normal map's slot and channel count
+                mat_rows[i, 6] = placed[-1]
+                fmt = m.normal_texture.vk_format
+                two = fmt in (VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK)
+                mat_rows[i, 7] = 2.0 if two else 1.0
+        mb.write(mat_rows)
+        n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
             maxSets=n_sets, poolSizeCount=2, pPoolSizes=[
                 vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=n_sets),
@@ -306,8 +318,8 @@ class Renderer:
         for s, dset in enumerate(sets):
             infos = []
             for slot in range(TEXTURE_SLOTS):
-                k = s * per_set + slot - 1
-                if slot > 0 and k < len(images):
+                if 0 < slot <= len(by_set[s]):
+                    k = by_set[s][slot - 1]
                     img, smp = images[k], samplers[k]
                 else:
                     img, smp = self.white, self.white_sampler

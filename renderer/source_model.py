@@ -17,7 +17,7 @@ import numpy as np
 
 from assetpipe.core.errors import AssetError, MissingFileError
 
-from .loader import VK_FORMAT_R8G8B8A8_SRGB, Lod, Material, Mesh, RenderModel, Texture
+from .loader import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, Lod, Material, Mesh, RenderModel, Texture
 
 
 def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
@@ -87,8 +87,22 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
                 images[id(image)] = texture
         except Exception as exc:  # noqa: BLE001
             notes.append(f"{name}: source image not usable ({exc})")
+    normal = None
+    nimage = getattr(mat, "normalTexture", None) if mat is not None else None
+    if nimage is not None and uv is not None:  # level 0 only, as UNORM data (the shaded check draws it)
+        key = (id(nimage), "normal")
+        try:
+            if images is not None and key in images:  # type: ignore[operator]
+                normal = images[key]  # type: ignore[index]
+            else:
+                normal = Texture(name=f"{name} source normal map", levels=[_rgba_of(nimage, decoded)],
+                                 vk_format=VK_FORMAT_R8G8B8A8_UNORM, sampler={"minFilter": 9729}, from_ktx2=False)
+                if images is not None:
+                    images[key] = normal  # type: ignore[index]
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"{name}: source normal map not usable ({exc})")
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
-                     double_sided=double_sided, texture=texture), uv, colors)
+                     double_sided=double_sided, texture=texture, normal_texture=normal), uv, colors)
 
 
 def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
