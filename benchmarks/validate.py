@@ -156,6 +156,20 @@ def against(args: argparse.Namespace) -> int:
             self._buf = b""
             self._ready = False
 
+    def cpu(pool: WorkerPool) -> float:
+        """CPU seconds the worker process has used (all its threads: lavapipe's too), from /proc:
+        far less sensitive to other users' load than wall time."""
+        try:
+            f = Path(f"/proc/{pool.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, AttributeError, IndexError, ValueError):
+            return float("nan")
+
+    def timed(pool: WorkerPool, m: Path):  # noqa: ANN202
+        c0 = cpu(pool)
+        r = pool.validate(m)
+        return r, cpu(pool) - c0
+
     opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
     models = find_built_models(args.paths)
     other, ours = TreePool(opts, str(Path(args.against).resolve())), TreePool(opts, str(REPO))
@@ -164,14 +178,15 @@ def against(args: argparse.Namespace) -> int:
     try:
         for i, m in enumerate(models):  # who goes first alternates: the second reads warm file caches
             if i % 2:
-                rn = ours.validate(m)
-                ro = other.validate(m)
+                rn, cn = timed(ours, m)
+                ro, co = timed(other, m)
             else:
-                ro = other.validate(m)
-                rn = ours.validate(m)
+                ro, co = timed(other, m)
+                rn, cn = timed(ours, m)
             to, tn = (sum(v for k, v in r.timings.items() if k != "setup") for r in (ro, rn))
-            rows.append((Path(m).name, to, tn, ro.passed, rn.passed))
-            print(f"{Path(m).name[:34]:<34} other {to:7.3f} s  this {tn:7.3f} s  ratio {tn / max(to, 1e-9):5.2f}  "
+            rows.append((Path(m).name, to, tn, ro.passed, rn.passed, co, cn))
+            print(f"{Path(m).name[:34]:<34} wall: other {to:7.3f} s  this {tn:7.3f} s  ratio {tn / max(to, 1e-9):5.2f}"
+                  f"  cpu: other {co:6.2f} s  this {cn:6.2f} s  "
                   f"{'pass' if ro.passed else 'FAIL'}/{'pass' if rn.passed else 'FAIL'}", flush=True)
     finally:
         other.close()
@@ -180,9 +195,11 @@ def against(args: argparse.Namespace) -> int:
     for label, i in (("other", 1), ("this", 2)):
         ts = [r[i] for r in rows]
         worst = max(rows, key=lambda r: r[i])[0] if rows else "-"
+        cs = [r[i + 4] for r in rows]
         print(f"{label}: per-model average {sum(ts) / n:.3f} s, maximum {max(ts, default=0):.3f} s ({worst}); "
               f"over 2 s: {sum(t > 2 for t in ts)}, over 1 s: {sum(t > 1 for t in ts)}; passed "
-              f"{sum(r[i + 2] for r in rows)} of {len(rows)}")
+              f"{sum(r[i + 2] for r in rows)} of {len(rows)}; CPU time: total {sum(cs):.2f} s, "
+              f"maximum {max(cs, default=0):.2f} s ({max(rows, key=lambda r: r[i + 4])[0] if rows else '-'})")
     print(f"load average (1, 5, 15 min) at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 
