@@ -1,6 +1,6 @@
 """One reading of a built model's KTX2 files for every check that looks at them.
 
-``textures`` walks every level of every texture, ``roles`` the level nearest 64 px of the same
+``textures`` walks every level of every texture, ``roles`` the level nearest 256 px of the same
 files: both go through :func:`open_ktx2`, which reads and parses a file once per model (kept
 in the model's :attr:`Context.cache <renderer.checks.base.Context.cache>`) and decodes a
 block-compressed level (BC / ETC2 / EAC, on the CPU) only when a check asks for it, once.
