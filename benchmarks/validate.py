@@ -7,14 +7,21 @@ Usage::
     .venv/bin/python benchmarks/validate.py --fixtures      # the renderer's hand-made fixtures only
     .venv/bin/python benchmarks/validate.py -j 2 OUT_DIR    # two renderer processes in parallel
     .venv/bin/python benchmarks/validate.py --mutations OUT_DIR   # catch rate of every mutation kind
+    .venv/bin/python benchmarks/validate.py --against /tmp/old OUT_DIR  # side by side with another tree
 
 Models are built once with ``assetpipe build`` into a temporary directory (models that fail
 to build are listed and left out). Validation runs in ``-j`` renderer subprocesses (device
-set-up once each, charged to its first model), 256x256, validation layer and every check on.
+set-up once each, before its first model, printed on its own line), 256x256, validation layer and
+every check on.
 Prints per-model time, its average and maximum, and the wall time. Goal: 1 s per model on
 average, 2 s at most. ``--mutations`` applies every mutation of ``tests/validate_mutations.py``
 to every model it applies to (plus the generated assets of ``tests/validate_assets.py``) and
-prints the catch rate per kind, and the false alarms on the unmutated models.
+prints the catch rate per kind, and the false alarms on the unmutated models. ``--against TREE``
+(a checkout of another commit, e.g. ``git archive BASE | tar -x -C /tmp/old``) validates each
+model with that tree's renderer worker and with this one's, one after the other (who goes first
+alternates from model to model), both warm, in one run,
+and prints both times and their ratio per model (times under shared load are comparable only
+side by side).
 """
 
 from __future__ import annotations
@@ -61,9 +68,12 @@ def main() -> int:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("-j", "--jobs", type=int, default=1, help="renderer processes in parallel")
     ap.add_argument("--mutations", action="store_true", help="catch rate of every mutation kind")
+    ap.add_argument("--against", metavar="TREE", help="another checkout's renderer, side by side")
     args = ap.parse_args()
     if args.mutations:
         return mutations(args)
+    if args.against:
+        return against(args)
     failed_builds: list[str] = []
     with tempfile.TemporaryDirectory(prefix="assetpipe-bench-") as tmp:
         if args.fixtures:
@@ -80,7 +90,8 @@ def main() -> int:
                 print("falling back to the fixtures")
         opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
         t0 = time.perf_counter()
-        results = validate_batch(models, opts, jobs=args.jobs)
+        stats: dict = {}
+        results = validate_batch(models, opts, jobs=args.jobs, stats=stats)
         wall = time.perf_counter() - t0
 
     cols = ("setup", "load", "upload", "render", "compare")
@@ -111,8 +122,85 @@ def main() -> int:
     print(f"{len(results)} models, -j {args.jobs}: per-model time average {sum(totals) / n:.3f} s (goal 1 s), "
           f"maximum {max(totals, default=0):.3f} s ({Path(results[worst].model).name if results else '-'}; "
           f"goal 2 s); wall time {wall:.2f} s ({wall / n:.3f} s per model); {sum(r.passed for r in results)} passed")
+    print("device set-up per renderer process (once, before its first model; in no model's time): "
+          + ", ".join(f"{x:.3f} s" for x in stats.get("setup", [])))
+    try:
+        print(f"load average (1, 5, 15 min) at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    except OSError:
+        pass
     for f in failed_builds:
         print(f"  not built: {f}")
+    return 0
+
+
+def against(args: argparse.Namespace) -> int:
+    """Each model by ``args.against``'s renderer worker and by ours, alternately, in one run."""
+    from assetpipe.renderer._vk import renderer_env  # noqa: PLC0415
+    from assetpipe.renderer.worker import WorkerPool  # noqa: PLC0415
+
+    class TreePool(WorkerPool):
+        """A renderer worker running another tree's code."""
+
+        def __init__(self, options: ValidateOptions, root: str) -> None:
+            super().__init__(options)
+            self.root = root
+
+        def _start(self) -> None:
+            if self._stderr is not None:
+                self._stderr.close()
+            self._stderr = tempfile.TemporaryFile()
+            env = renderer_env()
+            env["PYTHONPATH"] = self.root
+            self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
+            self._buf = b""
+            self._ready = False
+
+    def cpu(pool: WorkerPool) -> float:
+        """CPU seconds the worker process has used (all its threads: lavapipe's too), from /proc:
+        far less sensitive to other users' load than wall time."""
+        try:
+            f = Path(f"/proc/{pool.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, AttributeError, IndexError, ValueError):
+            return float("nan")
+
+    def timed(pool: WorkerPool, m: Path):  # noqa: ANN202
+        c0 = cpu(pool)
+        r = pool.validate(m)
+        return r, cpu(pool) - c0
+
+    opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
+    models = find_built_models(args.paths)
+    other, ours = TreePool(opts, str(Path(args.against).resolve())), TreePool(opts, str(REPO))
+    print(f"set-up: {args.against} {other.warm() or 0:.3f} s, this tree {ours.warm() or 0:.3f} s (in no model's time)")
+    rows = []
+    try:
+        for i, m in enumerate(models):  # who goes first alternates: the second reads warm file caches
+            if i % 2:
+                rn, cn = timed(ours, m)
+                ro, co = timed(other, m)
+            else:
+                ro, co = timed(other, m)
+                rn, cn = timed(ours, m)
+            to, tn = (sum(v for k, v in r.timings.items() if k != "setup") for r in (ro, rn))
+            rows.append((Path(m).name, to, tn, ro.passed, rn.passed, co, cn))
+            print(f"{Path(m).name[:34]:<34} wall: other {to:7.3f} s  this {tn:7.3f} s  ratio {tn / max(to, 1e-9):5.2f}"
+                  f"  cpu: other {co:6.2f} s  this {cn:6.2f} s  "
+                  f"{'pass' if ro.passed else 'FAIL'}/{'pass' if rn.passed else 'FAIL'}", flush=True)
+    finally:
+        other.close()
+        ours.close()
+    n = max(len(rows), 1)
+    for label, i in (("other", 1), ("this", 2)):
+        ts = [r[i] for r in rows]
+        worst = max(rows, key=lambda r: r[i])[0] if rows else "-"
+        cs = [r[i + 4] for r in rows]
+        print(f"{label}: per-model average {sum(ts) / n:.3f} s, maximum {max(ts, default=0):.3f} s ({worst}); "
+              f"over 2 s: {sum(t > 2 for t in ts)}, over 1 s: {sum(t > 1 for t in ts)}; passed "
+              f"{sum(r[i + 2] for r in rows)} of {len(rows)}; CPU time: total {sum(cs):.2f} s, "
+              f"maximum {max(cs, default=0):.2f} s ({max(rows, key=lambda r: r[i + 4])[0] if rows else '-'})")
+    print(f"load average (1, 5, 15 min) at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 
 

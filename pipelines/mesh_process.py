@@ -13,7 +13,8 @@
    from its origin, whose float32 positions collapse, is counted and dropped the same way
    whether it came as float64 OBJ text or float32 glTF;
 5. generate smooth normals where the layout needs them and the source has none, and tangents
-   where the layout carries them (``aiProcess_GenSmoothNormals`` / ``aiProcess_CalcTangentSpace``);
+   where the layout carries them (``aiProcess_GenSmoothNormals``; MikkTSpace tangents, as glTF
+   specifies, from ``pipelines/tangents.py``);
 6. drop duplicate triangles (after the weld, so they are found by vertex identity): exact
    ones (the same three vertices, the same winding, from any starting vertex) always, and
    reversed ones (the same three vertices, opposite winding) when the material is double-sided,
@@ -32,6 +33,7 @@ import numpy as np
 
 from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
 from assetpipe.pipelines.model import MeshData
+from assetpipe.pipelines.tangents import mikktspace_tangents
 
 
 # warn when the float32 position grid, at the model's largest coordinate, is coarser than this
@@ -131,7 +133,8 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
             arr = smooth_normals(pos, tris)
         elif name == "tangent" and arr is None:
             normals = provided["normal"] if provided["normal"] is not None else smooth_normals(pos, tris)
-            arr = tangents_from_uv(pos, tris, normals, uv_a)
+            arr = (mikktspace_tangents(pos, tris, normals, uv_a) if uv_a is not None
+                   else tangents_from_uv(pos, tris, normals, uv_a))
             if uv_a is None:
                 warnings.append(f"{mesh.name}: tangents requested without UVs; an arbitrary tangent frame was generated")
         elif arr is None:

@@ -38,7 +38,8 @@ def validate_model(model_json: Path | str, options: ValidateOptions | None = Non
 
 def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None = None,
                    isolate: bool = True, progress: Any = None, jobs: int = 1,
-                   baseline: dict[str, Any] | None = None) -> list[ValidationResult]:
+                   baseline: dict[str, Any] | None = None, stats: dict[str, Any] | None = None,
+                   ) -> list[ValidationResult]:
     """Validate many built models with long-lived renderer subprocesses.
 
     Device set-up happens once per subprocess; ``jobs`` subprocesses (each its own Vulkan
@@ -47,6 +48,10 @@ def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None 
     a clear message and a fresh subprocess continues. ``progress(result)`` is called after each
     asset (in completion order); the returned list is in input order. ``baseline`` (see
     :mod:`renderer.baseline`) marks accepted known differences.
+
+    Each subprocess sets its device up before it takes its first model (a warm-up the ``-j``
+    workers do side by side), so no model's time carries it; ``stats["setup"]`` (when ``stats``
+    is given) lists each worker's set-up seconds.
     """
     from .baseline import apply_baseline  # noqa: PLC0415
 
@@ -66,8 +71,19 @@ def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None 
             done(i, validate_model(p, options, isolate=False))
         return [r for r in out if r is not None]
     jobs = max(1, min(int(jobs), len(paths) or 1))
+    setups: list[float] = []
+    if stats is not None:
+        stats["setup"] = setups
+
+    def warm(pool: WorkerPool) -> None:
+        if paths:
+            s = pool.warm()
+            if s is not None:
+                setups.append(s)
+
     if jobs == 1:
         with WorkerPool(options) as pool:
+            warm(pool)
             for i, p in enumerate(paths):
                 done(i, pool.validate(p))
         return [r for r in out if r is not None]
@@ -81,6 +97,7 @@ def validate_batch(paths: Iterable[Path | str], options: ValidateOptions | None 
 
     def worker() -> None:
         with WorkerPool(options) as pool:  # subprocess I/O releases the GIL: threads suffice
+            warm(pool)
             while True:
                 try:
                     i = todo.get_nowait()

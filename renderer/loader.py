@@ -84,6 +84,7 @@ class Material:
     alpha_cutoff: float = 0.5
     double_sided: bool = False
     texture: Texture | None = None
+    normal_texture: Texture | None = None  # tangent-space normal map (UNORM), on the same UV set as ``texture``
 
     @property
     def blended(self) -> bool:
@@ -254,6 +255,23 @@ def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_p
                    from_ktx2=False)
 
 
+def _load_normal_texture(root: Path, mat_id: str, side_mat: dict[str, Any], notes: list[str]) -> Texture | None:
+    """The material's normal map (its KTX2, else level 0 of its image, as UNORM data), when it
+    samples the UV set the base colour does (the renderer draws one UV set)."""
+    textures = side_mat.get("textures") or {}
+    tex = textures.get("normal")
+    if not tex:
+        return None
+    base = textures.get("baseColor")
+    if base and int(base.get("texCoord", 0)) != int(tex.get("texCoord", 0)):
+        notes.append(f"material {mat_id}: the normal map uses another UV set than the base colour: not drawn")
+        return None
+    out = _load_texture(root, mat_id, tex, "", notes)
+    if out is not None and not out.from_ktx2:
+        out.vk_format = VK_FORMAT_R8G8B8A8_UNORM
+    return out
+
+
 def load_built_model(model_json: Path, load_textures: bool = True) -> RenderModel:
     """Read and check a built model; raises an :class:`AssetError` subclass naming the problem."""
     model_json = Path(model_json)
@@ -298,11 +316,13 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
         color = m.get("color") or sm.get("baseColorFactor") or [1, 1, 1, 1]
         tex = (sm.get("textures") or {}).get("baseColor")
         texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes) if load_textures else None
+        normal = _load_normal_texture(root, mid, sm, notes) if load_textures else None
         mat_index[mid] = len(materials)
         materials.append(Material(id=mid, base_color=tuple(float(c) for c in color[:4]),  # type: ignore[arg-type]
                                   alpha_mode=str(sm.get("alphaMode", "OPAQUE")),
                                   alpha_cutoff=float(sm.get("alphaCutoff", 0.5)),
-                                  double_sided=bool(sm.get("doubleSided", False)), texture=texture))
+                                  double_sided=bool(sm.get("doubleSided", False)), texture=texture,
+                                  normal_texture=normal))
 
     side_meshes = {m.get("id"): m for m in side.get("meshes", []) if isinstance(m, dict)}
     meshes: list[Mesh] = []

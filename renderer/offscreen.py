@@ -38,6 +38,8 @@ COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
 DEPTH_FORMAT_NAME = "VK_FORMAT_D32_SFLOAT"
 LIGHT_DIR = np.array([0.4, 0.8, 0.6])  # towards the light, camera-relative (x right, y up, z back)
 
+VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK = 141, 155  # two-channel normals: z rebuilt
+_MODE_CODE = {"facing": 2, "shaded+facing": 3}  # the fragment shader's pc.sel.z
 _WRAP = {10497: "VK_SAMPLER_ADDRESS_MODE_REPEAT", 33071: "VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE",
          33648: "VK_SAMPLER_ADDRESS_MODE_MIRRORED_REPEAT"}
 
@@ -277,21 +279,32 @@ class Renderer:
             mat_rows[i, 4] = m.alpha_cutoff
             mat_rows[i, 5] = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}.get(m.alpha_mode, 0)
         mb = ctx.create_buffer(mat_rows.nbytes, vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT)
-        mb.write(mat_rows)
 
         images: list[Image] = []
         samplers: list[Any] = []
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
-        for m in model.materials:
-            if m.texture is None:
-                slots.append((0, 0))
-                continue
-            k = len(images)
-            images.append(self._upload_texture(m.texture, model.notes))
-            samplers.append(self._make_sampler(m.texture.sampler, len(m.texture.levels)))
-            slots.append((k // per_set, 1 + k % per_set))
-        n_sets = max(1, math.ceil(len(images) / per_set))
+        by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
+        for i, m in enumerate(model.materials):
+            texs = [t for t in (m.texture, m.normal_texture) if t is not None]
+            if len(by_set[-1]) + len(texs) > per_set:  # a material's textures share one set
+                by_set.append([])
+            placed = []
+            for t in texs:
+                images.append(self._upload_texture(t, model.notes))
+                samplers.append(self._make_sampler(t.sampler, len(t.levels)))
+                by_set[-1].append(len(images) - 1)
+                placed.append(len(by_set[-1]))
+            s_idx = len(by_set) - 1
+            base_slot = placed[0] if m.texture is not None else 0
+            slots.append((s_idx if m.texture is not None or m.normal_texture is not None else 0, base_slot))
+            if m.normal_texture is not None:  # the shader reads the normal map's slot and channel count
+                mat_rows[i, 6] = placed[-1]
+                fmt = m.normal_texture.vk_format
+                two = fmt in (VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK)
+                mat_rows[i, 7] = 2.0 if two else 1.0
+        mb.write(mat_rows)
+        n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
             maxSets=n_sets, poolSizeCount=2, pPoolSizes=[
                 vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, descriptorCount=n_sets),
@@ -305,8 +318,8 @@ class Renderer:
         for s, dset in enumerate(sets):
             infos = []
             for slot in range(TEXTURE_SLOTS):
-                k = s * per_set + slot - 1
-                if slot > 0 and k < len(images):
+                if 0 < slot <= len(by_set[s]):
+                    k = by_set[s][slot - 1]
                     img, smp = images[k], samplers[k]
                 else:
                     img, smp = self.white, self.white_sampler
@@ -364,12 +377,12 @@ class Renderer:
 
         The background is transparent black (alpha 0): alpha > 0 is the coverage.
         """
-        if mode not in ("shaded", "silhouette", "coverage", "facing"):
+        if mode not in ("shaded", "silhouette", "coverage", "facing", "shaded+facing"):
             raise ValueError(f"unknown render mode {mode!r}")
         t0 = time.perf_counter()
         self.resize(camera.width, camera.height)
         vk, ctx = self.vk, self.ctx
-        silhouette = mode != "shaded"
+        silhouette = mode not in ("shaded", "shaded+facing")
         draws = self.draws(gpu, lod, meshes)
         eye = np.asarray(camera.eye, np.float64)
         opaque = [d for d in draws if silhouette or not d.blended]
@@ -416,7 +429,7 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                if mode in ("coverage", "facing"):
+                if mode in ("coverage", "facing", "shaded+facing"):
                     key = (False, False)
                 elif silhouette:
                     key = (not d.double_sided, False)
@@ -431,8 +444,8 @@ class Renderer:
                     vk.vkCmdBindDescriptorSets(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, self.pipeline_layout,
                                                0, 1, [dset], 0, None)
                     bound_set = dset
-                ints[:] = (d.material, d.tex_slot, 2 if mode == "facing" else 1 if silhouette else 0,
-                           1 if d.double_sided else 0)
+                code = _MODE_CODE.get(mode, 1 if silhouette else 0)
+                ints[:] = (d.material, d.tex_slot, code, 1 if d.double_sided else 0)
                 data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
                 vk.vkCmdPushConstants(cmd, self.pipeline_layout,
                                       vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
@@ -458,6 +471,33 @@ class Renderer:
         out = readback.read(w * h * 4).reshape(h, w, 4)
         self.timings["render"] += time.perf_counter() - t0
         return out
+
+    def one_pass(self, gpu: GpuModel) -> bool:
+        """Whether :meth:`render_pair` draws ``gpu`` in one pass: every material OPAQUE (no MASK
+        discard, no blending), so the shaded and the facing pictures share their nearest surfaces."""
+        return all(m.alpha_mode == "OPAQUE" for m in gpu.model.materials)
+
+    def render_pair(self, gpu: GpuModel, camera: Camera, lod: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """(shaded, facing) renders of one view, as ``render(mode="shaded")`` and
+        ``render(mode="facing")`` give them, from one pass when :meth:`one_pass` allows.
+
+        The one pass draws without culling (as ``facing`` must) and writes the facing into alpha:
+        its shaded picture therefore shows a single-sided back face where it is the nearest
+        surface, where a culled render shows what lies behind it. For a model whose nearest
+        surfaces face the eye (what the winding comparison holds every good model to) the two
+        are the same picture; the checks compare a build with its source drawn the same way.
+        """
+        if not self.one_pass(gpu):
+            return self.render(gpu, camera, lod=lod), self.render(gpu, camera, mode="facing", lod=lod)
+        img = self.render(gpu, camera, mode="shaded+facing", lod=lod)
+        a = img[..., 3]
+        covered = a > 0
+        facing = np.zeros_like(img)
+        facing[..., 0] = np.where(a > 191, 255, np.where(covered, 188, 0))  # alpha 1.0 -> 255, 0.5 -> 128
+        facing[..., 3] = np.where(covered, 255, 0)
+        shaded = img.copy()
+        shaded[..., 3] = facing[..., 3]
+        return shaded, facing
 
     # ----------------------------------------------------------------------- teardown
     def close(self) -> None:

@@ -17,10 +17,26 @@ import numpy as np
 
 from assetpipe.core.errors import AssetError, MissingFileError
 
-from .loader import VK_FORMAT_R8G8B8A8_SRGB, Lod, Material, Mesh, RenderModel, Texture
+from .loader import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, Lod, Material, Mesh, RenderModel, Texture
+
+
+def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
+    """(H, W, 4) uint8 of a PIL image trimesh opened (lazily: still undecoded). With ``decoded``
+    (a validation run's per-model cache) its file bytes go through the checks' one decoder, so
+    the ``textures`` and ``roles`` checks reuse this decode instead of repeating it."""
+    fp = getattr(image, "fp", None)
+    if decoded is not None and hasattr(fp, "getvalue"):
+        from .checks.images import decode_rgba  # noqa: PLC0415
+
+        try:
+            return decode_rgba(fp.getvalue(), decoded)
+        except Exception:  # noqa: BLE001 - Pillow below reports what is wrong with the image
+            pass
+    return np.asarray(image.convert("RGBA"), np.uint8)
 
 
 def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
+                 decoded: dict[str, Any] | None = None,
                  ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
     """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry."""
     visual = getattr(geom, "visual", None)
@@ -64,21 +80,36 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
         texture = images[id(image)]
     elif image is not None and uv is not None:
         try:
-            rgba = np.asarray(image.convert("RGBA"), np.uint8)
+            rgba = _rgba_of(image, decoded)
             texture = Texture(name=f"{name} source image", levels=[rgba], vk_format=VK_FORMAT_R8G8B8A8_SRGB,
                               sampler={"minFilter": 9729}, from_ktx2=False)
             if images is not None:
                 images[id(image)] = texture
         except Exception as exc:  # noqa: BLE001
             notes.append(f"{name}: source image not usable ({exc})")
+    normal = None
+    nimage = getattr(mat, "normalTexture", None) if mat is not None else None
+    if nimage is not None and uv is not None:  # level 0 only, as UNORM data (the shaded check draws it)
+        key = (id(nimage), "normal")
+        try:
+            if images is not None and key in images:  # type: ignore[operator]
+                normal = images[key]  # type: ignore[index]
+            else:
+                normal = Texture(name=f"{name} source normal map", levels=[_rgba_of(nimage, decoded)],
+                                 vk_format=VK_FORMAT_R8G8B8A8_UNORM, sampler={"minFilter": 9729}, from_ktx2=False)
+                if images is not None:
+                    images[key] = normal  # type: ignore[index]
+        except Exception as exc:  # noqa: BLE001
+            notes.append(f"{name}: source normal map not usable ({exc})")
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
-                     double_sided=double_sided, texture=texture), uv, colors)
+                     double_sided=double_sided, texture=texture, normal_texture=normal), uv, colors)
 
 
-def load_source_model(path: Path, flat: bool = False) -> RenderModel:
+def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
     """Import ``path`` with trimesh, flatten its scene, and return it as a RenderModel.
 
     ``flat=True`` ignores materials (one white opaque material). Points and lines are dropped.
+    ``decoded``: a per-model cache shared with the checks (see ``_rgba_of``).
     """
     import trimesh  # noqa: PLC0415
 
@@ -126,7 +157,7 @@ def load_source_model(path: Path, flat: bool = False) -> RenderModel:
         elif gname in mat_cache:
             mat_index, uv, col = mat_cache[gname]
         else:
-            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache)
+            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded)
             mat_index = len(materials)
             materials.append(mat)
             mat_cache[gname] = (mat_index, uv, col)

@@ -64,11 +64,13 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
                         for v in options.views]
             with ctx.timer("render"):
                 for cam in ctx.cams:
-                    facing = renderer.render(ctx.gpu, cam, mode="facing")
+                    if "source" in selected:  # one pass for both when every material is OPAQUE
+                        shaded, facing = renderer.render_pair(ctx.gpu, cam)
+                        ctx.shaded.append(shaded)
+                    else:
+                        facing = renderer.render(ctx.gpu, cam, mode="facing")
                     ctx.coverage.append(compare.coverage(facing))
                     ctx.front.append(compare.front(facing))
-                    if "source" in selected:
-                        ctx.shaded.append(renderer.render(ctx.gpu, cam))
         for check in REGISTRY:
             if check.name not in selected or check.name == "vulkan":
                 continue

@@ -72,8 +72,9 @@ def _serve() -> int:
                 import trimesh  # noqa: F401,PLC0415
                 setup = time.perf_counter() - t0
                 proto.write(json.dumps({"ready": True, "setup": setup}) + "\n")
-            if req.get("cmd") == "ping":
-                proto.write(json.dumps({"pong": True}) + "\n")
+            if req.get("cmd") == "ping":  # a warm-up: the set-up is reported here, charged to no asset
+                proto.write(json.dumps({"pong": True, "setup": setup}) + "\n")
+                setup = 0.0
                 continue
             _test_hooks(req["model"])
             result = run_checks(Path(req["model"]), opts, renderer)
@@ -97,6 +98,8 @@ class WorkerPool:
         self._stderr: BinaryIO | None = None
         self._buf = b""
         self.restarts = 0
+        self.setup_seconds = 0.0  # device set-up measured by warm()
+        self._ready = False  # the running process has set its device up
 
     # ------------------------------------------------------------------ process control
     def _start(self) -> None:
@@ -109,6 +112,7 @@ class WorkerPool:
         self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
         self._buf = b""
+        self._ready = False
 
     def _stop(self, kill: bool = False) -> None:
         proc, self.proc = self.proc, None
@@ -182,6 +186,24 @@ class WorkerPool:
         return f"exited with status {rc}"
 
     # ---------------------------------------------------------------------------- API
+    def warm(self) -> float | None:
+        """Start the subprocess and set its device up before the first asset (``-j`` workers do
+        this side by side); returns the set-up seconds, or None if the process did not answer
+        (the first :meth:`validate` then restarts it and reports why)."""
+        if self.proc is None or self.proc.poll() is not None:
+            self._start()
+        if not self._send({"cmd": "ping", "options": self.options.to_dict()}):
+            return None
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        while True:
+            msg = self._readline(deadline)
+            if msg is None:
+                return None
+            if msg.get("pong"):
+                self._ready = True
+                self.setup_seconds = float(msg.get("setup", 0.0))
+                return self.setup_seconds
+
     def validate(self, model_json: Path | str) -> ValidationResult:
         """Validate one model in the subprocess; failures of the process fail this model only."""
         model_json = Path(model_json)
@@ -198,7 +220,7 @@ class WorkerPool:
             fail.error = f"renderer process {self._death()}: {self._stderr_tail()}"
             self._stop(kill=True)
             return fail
-        deadline = t0 + timeout + READY_TIMEOUT_S
+        deadline = t0 + timeout + (0.0 if self._ready else READY_TIMEOUT_S)  # a warm process is set up
         while True:
             msg = self._readline(deadline)
             if msg is None:
@@ -212,6 +234,7 @@ class WorkerPool:
                 self.restarts += 1
                 return fail
             if msg.get("ready"):
+                self._ready = True
                 deadline = time.monotonic() + timeout  # the timeout counts from device set-up
                 continue
             if "result" in msg:

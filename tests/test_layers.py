@@ -31,11 +31,19 @@ ALLOWED = {"assetpipe.core": set(), "assetpipe.cache": {"assetpipe.core"},
 
 
 def _modules() -> dict[str, Path]:
+    """Every module of every package, subpackages included (``renderer/checks/*.py`` is
+    ``assetpipe.renderer.checks.*``); a folder that is another package's (``assetpipe/core``
+    under ``assetpipe``) belongs to that package, not twice."""
     mods = {}
+    others = {f.resolve() for f in PACKAGES.values()}
     for pkg, folder in PACKAGES.items():
-        for f in folder.glob("*.py"):
-            name = pkg if f.stem == "__init__" else f"{pkg}.{f.stem}"
-            mods.setdefault(name, f)
+        for f in sorted(folder.rglob("*.py")):
+            rel = f.relative_to(folder)
+            inner = [folder.joinpath(*rel.parts[:i]).resolve() for i in range(1, len(rel.parts))]
+            if any(d in others for d in inner) or not all((d / "__init__.py").is_file() for d in inner):
+                continue  # another package's folder, or not a package (no __init__.py)
+            parts = list(rel.parts[:-1]) + ([] if f.stem == "__init__" else [f.stem])
+            mods.setdefault(".".join([pkg, *parts]), f)
     return mods
 
 
@@ -86,6 +94,11 @@ def test_the_graph_reader_sees_imports():
     assert "assetpipe.core.errors" in graph["assetpipe.pipelines.import_gltf"]
     assert "assetpipe.renderer.validate" in graph["assetpipe.renderer.batch"]  # a relative import
     assert "assetpipe.pipelines.lod" in graph["assetpipe.steps"]  # a lazy import inside a function
+    # subpackages are scanned, their relative imports resolved from the subpackage
+    assert "assetpipe.renderer.checks.base" in graph["assetpipe.renderer.checks.textures"]
+    assert "assetpipe.renderer.loader" in graph["assetpipe.renderer.checks.textures"]  # ``from ..loader``
+    assert "assetpipe.renderer.checks" in graph["assetpipe.renderer.validate"]
+    assert "assetpipe.renderer.checks.ktx2_levels" in graph["assetpipe.renderer.checks.roles"]
 
 
 def test_no_import_runs_up_the_layers():

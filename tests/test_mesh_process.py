@@ -268,7 +268,8 @@ def test_non_finite_uvs_do_not_spoil_generated_tangents():
     pm = process_mesh(_mesh(pos, tris, uv0=uv), layout)
     want = process_mesh(_mesh(pos, tris, uv0=clean), layout)
     np.testing.assert_array_equal(pm.vertices, want.vertices)
-    np.testing.assert_allclose(pm.vertices[:, 8:12], np.tile([1.0, 0, 0, 1], (4, 1)), atol=1e-12)
+    # MikkTSpace in glTF handedness: bitangent cross(n, t) * w = -dP/dV (a normal map's green runs up)
+    np.testing.assert_allclose(pm.vertices[:, 8:12], np.tile([1.0, 0, 0, -1], (4, 1)), atol=1e-12)
     assert len(pm.warnings) == 1 and "uv0" in pm.warnings[0]
 
 

@@ -122,6 +122,58 @@ def wrong_texture(m: Path) -> None:
     raise NotApplicable("no normal + occlusion")
 
 
+def _wrong_in_role(role: str) -> Callable[[Path], None]:
+    """Consistently wrong in ``role``: its texture replaced by another image (the same one turned
+    180 degrees), the KTX2 chain and the level-0 image alike, so the files agree with each other
+    and only a comparison with the source can tell."""
+
+    def mutate(m: Path) -> None:
+        import cv2  # noqa: PLC0415
+
+        _, tex = _texture(m, role)
+        path = m.parent / tex["ktx2"]
+        img = read_ktx2(path.read_bytes())
+        if img.block_format is not None:
+            raise NotApplicable("block-compressed texture")
+        levels = [np.ascontiguousarray(np.asarray(lv)[::-1, ::-1]) for lv in img.levels]
+        if all(np.array_equal(a, b) for a, b in zip(levels, img.levels)):
+            raise NotApplicable(f"the {role} texture looks the same turned 180 degrees")
+        path.write_bytes(write_ktx2(levels, int(img.vk_format)))
+        if tex.get("path"):
+            png = m.parent / tex["path"]
+            data = cv2.imdecode(np.fromfile(png, np.uint8), cv2.IMREAD_UNCHANGED)
+            ok, enc = cv2.imencode(".png", np.ascontiguousarray(data[::-1, ::-1]))
+            assert ok
+            png.with_suffix(".png").write_bytes(enc.tobytes())
+            if png.suffix.lower() != ".png":  # keep the sidecar's name pointing at the new bytes
+                side_p = _files(m)[1]
+                side = _json(side_p)
+                for mat in side["materials"]:
+                    t = (mat.get("textures") or {}).get(role)
+                    if t and t.get("path") == tex["path"]:
+                        t["path"] = str(Path(tex["path"]).with_suffix(".png"))
+                side_p.write_text(json.dumps(side))
+
+    return mutate
+
+
+def wrong_emissive(m: Path) -> None:
+    """Consistently wrong emissive: the sidecar's emissive entry names the base colour's files
+    (both sRGB). (Turning a mostly-black emissive map 180 degrees moves a few bright texels,
+    which a 64 px comparison of means cannot see, nor would a viewer: not used here.)"""
+    side_p = _files(m)[1]
+    side = _json(side_p)
+    for mat in side["materials"]:
+        t = mat.get("textures") or {}
+        if "emissive" in t and "baseColor" in t and t["emissive"].get("ktx2") != t["baseColor"].get("ktx2"):
+            for k in ("path", "ktx2", "width", "height", "levels", "vkFormat"):
+                if k in t["baseColor"]:
+                    t["emissive"][k] = t["baseColor"][k]
+            side_p.write_text(json.dumps(side))
+            return
+    raise NotApplicable("no separate emissive and base colour textures")
+
+
 def srgb_linear_swapped(m: Path) -> None:
     """The base colour stored (and declared) as UNORM: sRGB data read as linear."""
     side, tex = _texture(m, "baseColor")
@@ -220,6 +272,11 @@ MUTATIONS: dict[str, tuple[Callable[[Path], None], tuple[str, ...], str]] = {
     "flipped V": (flipped_v, ("source", "uvs"), "shaded colours differ|flipped or shifted UVs"),
     "swapped textures": (swapped_textures, ("textures", "roles"), "differs"),
     "wrong texture (consistent)": (wrong_texture, ("roles",), "differs from the source's normal image"),
+    "wrong normal map (consistent)": (_wrong_in_role("normal"), ("roles",), "differs from the source's normal"),
+    "wrong metallic-roughness (consistent)": (_wrong_in_role("metallicRoughness"), ("roles",),
+                                              "differs from the source's metallicRoughness"),
+    "wrong occlusion (consistent)": (_wrong_in_role("occlusion"), ("roles",), "differs from the source's occlusion"),
+    "wrong emissive (consistent)": (wrong_emissive, ("roles",), "differs from the source's emissive"),
     "sRGB and linear swapped": (srgb_linear_swapped, ("textures",), "sRGB and linear swapped"),
     "normal channels swapped (x/y)": (normal_channels_swapped, ("textures",), "swapped texture or channels"),
     "normal channels swapped (x/z)": (normal_xz_swapped, ("textures",), "mean z"),

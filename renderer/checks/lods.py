@@ -78,6 +78,7 @@ class LodsCheck(Check):
         # one view: a hole on the far side shows as open edges (above), and each view costs two renders
         # of the full LOD0 per level (4 s of lavapipe time for a 1M-triangle model under load)
         views = (options.views[0],)
+        lod0: dict[tuple, np.ndarray] = {}  # LOD0's picture per camera: levels clamped to one distance share it
         for k in range(1, levels):
             dists = [m.lods[min(k, len(m.lods) - 1)].switch_distance for m in model.meshes if m.lods]
             switch = max(dists) if dists else 0.0
@@ -89,7 +90,10 @@ class LodsCheck(Check):
             for view in views:
                 cam = fit_camera(model.center, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
                 with ctx.timer("render"):
-                    a = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
+                    key = (view, distance, size, fov)
+                    if key not in lod0:
+                        lod0[key] = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
+                    a = lod0[key]
                     b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
                 with ctx.timer("compare"):
                     bad = max(bad, int(compare.unexplained(a, b, 1).sum()))

@@ -56,7 +56,7 @@ def load_source(ctx: Context) -> tuple[Path | None, Any, str | None]:
         else:
             try:
                 with ctx.timer("load"):
-                    ctx.cache["source"] = (src, load_source_model(src), None)
+                    ctx.cache["source"] = (src, load_source_model(src, decoded=ctx.cache), None)
             except AssetpipeError as exc:
                 ctx.cache["source"] = (src, None, f"source not importable by trimesh: {exc}")
     return ctx.cache["source"]
@@ -119,10 +119,12 @@ class SourceCheck(Check):
             with ctx.timer("upload"):
                 gpu = renderer.upload(source)
             for k, (cam, sil, a, img) in enumerate(zip(ctx.cams, ctx.coverage, ctx.front, ctx.shaded)):
-                with ctx.timer("render"):
-                    facing = renderer.render(gpu, cam, mode="facing")
+                with ctx.timer("render"):  # drawn as the build was (one pass when both are all OPAQUE)
+                    if renderer.one_pass(gpu) == renderer.one_pass(ctx.gpu):
+                        simg, facing = renderer.render_pair(gpu, cam)
+                    else:
+                        simg, facing = renderer.render(gpu, cam), renderer.render(gpu, cam, mode="facing")
                     ssil, b = compare.coverage(facing), compare.front(facing)
-                    simg = renderer.render(gpu, cam)
                 with ctx.timer("compare"):
                     union = max(int((sil | ssil).sum()), 1)
                     xor = compare.xor_fraction(sil, ssil)

@@ -17,10 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from ..loader import material_list_path, read_ktx2, sidecar_path
+from ..loader import material_list_path, sidecar_path
 from ..results import CheckResult, ValidateOptions
 from .base import Check, Context
 from .images import decode_rgba
+from .ktx2_levels import open_ktx2
 
 SRGB_ROLES = {"baseColor", "emissive"}
 VK_SRGB, VK_UNORM = 43, 37
@@ -88,27 +89,20 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
     fig: dict[str, Any] = {}
     ktx_rel = tex["ktx2"]
     try:
-        img = read_ktx2((root / ktx_rel).read_bytes())
+        img = open_ktx2(root / ktx_rel, cache)
     except OSError as exc:
         r.worst("unreadable", 1, 0)
         return [f"{key}: KTX2 {ktx_rel} missing ({exc.strerror})"], fig
     except Exception as exc:  # noqa: BLE001
         r.worst("unreadable", 1, 0)
         return [f"{key}: KTX2 {ktx_rel} unreadable: {exc}"], fig
-    w, h, levels = int(img.width), int(img.height), [np.asarray(lv) for lv in img.levels]
-    fmt = int(img.vk_format)
-    srgb = bool(img.srgb)
-    block = img.block_format
-    stored = 4
-    if block is not None:  # BC / ETC2 / EAC: decoded on the CPU by texture2ddecoder, then checked alike
-        from assetpipe.core.ktx2 import decode_level, stored_channels  # noqa: PLC0415
-
-        try:
-            levels = [decode_level(lv, fmt, max(w >> i, 1), max(h >> i, 1)) for i, lv in enumerate(levels)]
-        except ValueError as exc:
-            r.worst("unreadable", 1, 0)
-            return [f"{key}: KTX2 {ktx_rel} blocks unreadable: {exc}"], fig
-        stored = len(stored_channels(fmt))
+    w, h, fmt, srgb, block, stored = img.width, img.height, img.vk_format, img.srgb, img.block, img.stored
+    try:  # BC / ETC2 / EAC levels are decoded on the CPU (texture2ddecoder), then checked alike
+        levels = [img.level(i) for i in range(img.count)]
+    except ValueError as exc:
+        r.worst("unreadable", 1, 0)
+        return [f"{key}: KTX2 {ktx_rel} blocks unreadable: {exc}"], fig
+    if block is not None:
         fig["blockFormat"] = block.name
         if role == "normal" and stored == 2:  # BC5 / EAC RG11 keep x and y; z is rebuilt as the shader does
             levels = [_rebuild_z(lv) for lv in levels]

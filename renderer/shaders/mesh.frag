@@ -1,7 +1,8 @@
 #version 450
 // Base colour = factor x texture x vertex colour (glTF). The texture's SRGB format decodes
 // sRGB to linear when sampling; the SRGB colour target encodes on write.
-// Lighting uses the geometric normal from screen-space derivatives: no normals needed.
+// Lighting uses the geometric normal from screen-space derivatives (no normals needed), bent by the
+// material's normal map when it has one.
 layout(location = 0) in vec3 vPos;
 layout(location = 1) in vec2 vUV;
 layout(location = 2) in vec4 vColor;
@@ -9,7 +10,8 @@ layout(location = 0) out vec4 outColor;
 
 struct Material {
     vec4 baseColor;   // linear RGBA factor
-    vec4 params;      // x alphaCutoff, y alphaMode (0 OPAQUE, 1 MASK, 2 BLEND), z, w unused
+    vec4 params;      // x alphaCutoff, y alphaMode (0 OPAQUE, 1 MASK, 2 BLEND), z normal-map slot (0: none),
+                      // w 1 (x, y, z stored) or 2 (x, y stored: z rebuilt)
 };
 layout(std430, set = 0, binding = 0) readonly buffer Materials { Material materials[]; };
 // Fixed-size array (lavapipe has no descriptor indexing), indexed by a push constant:
@@ -20,7 +22,7 @@ layout(push_constant) uniform PushConstants {
     mat4 viewProj;
     vec4 eye;
     vec4 lightDir;
-    ivec4 sel;
+    ivec4 sel;       // x material, y texture slot, z mode (0 shaded, 1 silhouette, 2 facing, 3 shaded+facing), w double-sided
 } pc;
 
 void main() {
@@ -32,14 +34,34 @@ void main() {
         outColor = vec4((gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5, 0.0, 0.0, 1.0);  // double-sided), 0.5 where
         return;                     // a back face is nearest; alpha 1 wherever anything covers
     }
-    vec3 n = normalize(cross(dFdx(vPos), dFdy(vPos)));
+    vec3 dp1 = dFdx(vPos), dp2 = dFdy(vPos);  // derivatives first: before any discard
+    vec2 duv1 = dFdx(vUV), duv2 = dFdy(vUV);
+    vec3 n = normalize(cross(dp1, dp2));
     vec3 toEye = normalize(pc.eye.xyz - vPos);
     if (dot(n, toEye) < 0.0) n = -n;
     Material m = materials[pc.sel.x];
+    int nslot = int(m.params.z + 0.5);
+    if (nslot > 0) {
+        // Normal map in a per-pixel tangent frame from the position and UV derivatives (the
+        // cotangent frame, Schueler 2013): the same frame for the build and its source, from the
+        // geometry and UVs alone, so the picture changes with the normal map, not the frame.
+        // glTF's green is +Y, towards decreasing V: the bitangent is -dP/dV.
+        vec3 dp2perp = cross(dp2, n), dp1perp = cross(n, dp1);
+        vec3 T = dp2perp * duv1.x + dp1perp * duv2.x;
+        vec3 B = dp2perp * duv1.y + dp1perp * duv2.y;
+        float scale = inversesqrt(max(max(dot(T, T), dot(B, B)), 1e-30));
+        vec3 tn = texture(textures[nslot], vUV).xyz * 2.0 - 1.0;
+        if (m.params.w > 1.5) tn.z = sqrt(max(0.0, 1.0 - dot(tn.xy, tn.xy)));  // BC5 / EAC RG11: x, y only
+        vec3 mapped = T * scale * tn.x - B * scale * tn.y + n * tn.z;
+        if (dot(mapped, mapped) > 1e-12) n = normalize(mapped);
+    }
     vec4 base = m.baseColor * texture(textures[pc.sel.y], vUV) * vColor;
     int mode = int(m.params.y + 0.5);
     if (mode == 1 && base.a < m.params.x) discard;
     if (mode != 2) base.a = 1.0;
     float diffuse = max(dot(n, normalize(pc.lightDir.xyz)), 0.0);
     outColor = vec4(base.rgb * (0.3 + 0.7 * diffuse), base.a);
+    if (pc.sel.z == 3) {            // shaded + facing in one pass (OPAQUE materials, no culling): alpha 1
+        outColor.a = (gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5;  // where the nearest surface faces the
+    }                               // eye (or is double-sided), 0.5 where a back face is nearest
 }

@@ -8,7 +8,7 @@ layout(push_constant) uniform PushConstants {
     mat4 viewProj;   // Vulkan clip space (y down, depth 0..1), column-major
     vec4 eye;        // camera position (xyz)
     vec4 lightDir;   // direction towards the light (xyz), model space
-    ivec4 sel;       // x material index, y texture slot, z mode (0 shaded, 1 silhouette, 2 facing), w double-sided
+    ivec4 sel;       // x material index, y texture slot, z mode (0 shaded, 1 silhouette, 2 facing, 3 shaded+facing), w double-sided
 } pc;
 
 layout(location = 0) out vec3 vPos;
