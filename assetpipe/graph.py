@@ -415,9 +415,12 @@ class Graph:
                     continue
                 m = rec["meta"]
                 if max(m.get("sourceWidth", 0), m.get("sourceHeight", 0)) > max(m["width"], m["height"]):
+                    # the scene lowered the cap, or it is the build's own maximum texture size
+                    why = ("the build's maximum texture size (--max-texture-size)"
+                           if cap == self._options(a).texture.max_size
+                           else "the largest on-screen size or the scene's texture budget")
                     a.skipped.append(f"{a.plan.label}: {label}: mip levels above {m['width']}x{m['height']} not built "
-                                     f"(source {m['sourceWidth']}x{m['sourceHeight']}; capped at {cap} px by the "
-                                     "largest on-screen size or the scene's texture budget)")
+                                     f"(source {m['sourceWidth']}x{m['sourceHeight']}; capped at {cap} px by {why})")
 
     def _lod(self, assets: list[AssetState]) -> None:
         jobs = []

@@ -273,3 +273,22 @@ def test_scenes_that_disagree_on_a_models_codec_fail_with_one_line(tmp_path):
     assert r.failed
     assert "scenes ask for different texture_compression (bc in scene a object 0, etc2 in scene b object 0)" \
         in r.failed[0].error
+
+
+def test_a_scene_says_which_cap_dropped_its_mip_levels(tmp_path):
+    """A scene build names the cause of a texture's missing top levels: the scene's own budget
+    when it is the lower cap, else the build's maximum texture size."""
+    import dataclasses
+
+    crate_dir = Path(__file__).resolve().parents[1] / "examples/crate"
+    shutil.copytree(crate_dir, tmp_path / "crate")
+    model = {"model": {"name": str(tmp_path / "crate/crate.gltf"), "lod": {"generate": False}}}
+    opts = dataclasses.replace(DEFAULT_BUILD_OPTIONS,
+                               texture=dataclasses.replace(DEFAULT_BUILD_OPTIONS.texture, max_size=64))
+    cases = {"build": (write_scene(tmp_path / "a.json", [model]), "the build's maximum texture size"),
+             "scene": (write_scene(tmp_path / "b.json", [model], texture_budget=32), "the scene's texture budget")}
+    for name, (scene, why) in cases.items():
+        r = run_build([scene], tmp_path / f"out-{name}", opts, cache_dir=tmp_path / "cache")
+        assert not r.failed, r.failed
+        lines = [s for a in r.results for s in a.skipped if "mip levels above" in s]
+        assert lines and all(why in s for s in lines), (name, lines)
