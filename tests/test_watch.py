@@ -92,10 +92,15 @@ def test_a_bad_save_keeps_the_last_good_outputs_and_watching_goes_on(session):
 def test_cli_watch_with_preview_until_interrupted(tmp_path):
     src = tmp_path / "src"
     shutil.copytree(REPO / "examples" / "pyramid", src / "pyramid")
-    env = {**os.environ, "PYTHONPATH": str(REPO), "ASSETPIPE_CACHE": str(tmp_path / "cache")}
+    env = {**os.environ, "PYTHONPATH": str(REPO), "ASSETPIPE_CACHE": str(tmp_path / "cache"),
+           "PYTHONFAULTHANDLER": "1"}  # a hang at exit dumps every thread's stack (SIGABRT below)
     proc = subprocess.Popen([sys.executable, "-m", "assetpipe.cli", "watch", str(src), "-o", str(tmp_path / "out"),
                              "--preview", "-j", "1", "--debounce", "200"], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=env)
+                            stderr=subprocess.STDOUT, text=True, env=env,
+                            # Ctrl-C as a shell's foreground job gets it: a process started with
+                            # SIGINT ignored (as a library in the test process may leave it)
+                            # keeps ignoring it, and Python installs no KeyboardInterrupt
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
 
@@ -126,7 +131,17 @@ def test_cli_watch_with_preview_until_interrupted(tmp_path):
         try:
             proc.wait(TIMEOUT)
         except subprocess.TimeoutExpired:
-            proc.kill()
+            proc.send_signal(signal.SIGABRT)
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(10)
+            time.sleep(0.5)
+            rest = []
+            while not lines.empty():
+                rest.append(lines.get())
+            pytest.fail(f"watch did not exit within {TIMEOUT} s of SIGINT; its last output:\n" + "".join(rest[-200:]))
     assert proc.returncode == 0
 
 
