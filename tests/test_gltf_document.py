@@ -47,7 +47,7 @@ def test_malformed_structures_are_one_clear_line(tmp_path, mutate, words):
     assert words in check_structure(doc)
     path = tmp_path / "bad.gltf"
     path.write_text(json.dumps(doc))
-    with pytest.raises(AssetError) as err:
+    with pytest.raises(AssetError, match='has a malformed glTF structure') as err:
         import_gltf(path)
     assert "bad.gltf" in str(err.value) and "malformed glTF structure" in str(err.value)
     assert "\n" not in str(err.value)

@@ -471,7 +471,7 @@ def test_non_finite_positions_are_invalid_geometry(tmp_path, bad):
 def test_positions_overflowing_under_the_node_transform(tmp_path):
     b = GltfBuilder()
     b.add_node(mesh=b.add_triangles(TRI * 3e38), scale=[1e300, 1e300, 1e300])
-    with pytest.raises(InvalidGeometryError):
+    with pytest.raises(InvalidGeometryError, match='positions are non-finite or beyond'):
         build(b, tmp_path)
 
 

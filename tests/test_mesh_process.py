@@ -310,7 +310,7 @@ def test_processing_is_deterministic_and_leaves_its_input_alone():
 
 
 def test_layout_with_a_repeated_attribute_is_refused():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match='layout names an attribute twice'):
         MeshOptions(layout=("position", "uv0", "uv0"))
 
 

@@ -105,7 +105,7 @@ def test_structured_dtype_refused():
 
 
 def test_non_finite_meta_refused():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match='Out of range float values are not JSON compliant'):
         pack({"x": float("nan")}, {})
 
 
@@ -135,5 +135,6 @@ def _with_header(header: dict | list | str, tail: bytes = b"") -> bytes:
                  b"\0" * 8),
 ])
 def test_garbage_refused_with_value_error(data):
-    with pytest.raises(ValueError):
+    # every refusal of unpack() names what is wrong with the pack (cache/serialize.py)
+    with pytest.raises(ValueError, match="not an assetpipe pack|assetpipe pack: |bad array entry"):
         unpack(data)

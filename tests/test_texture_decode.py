@@ -148,7 +148,7 @@ def test_bomb_above_pillows_own_limit_is_ours_not_a_warning():
     # 20000 x 20000 exceeds Pillow's MAX_IMAGE_PIXELS warning threshold; a GIF header is enough.
     data = b"GIF89a" + struct.pack("<HH", 20000, 20000) + b"\x00\x00\x00" + b"," + b"\x00" * 9
     with _no_warning():
-        with pytest.raises(InvalidTextureError):
+        with pytest.raises(InvalidTextureError, match='cannot identify image file'):
             decode_image(source(data, "bomb.gif"), max_pixels=10_000)
 
 
@@ -174,18 +174,18 @@ def test_truncated_and_corrupt(cut):
     with pytest.raises(InvalidTextureError, match="/models/t.png"):
         decode_image(source(data[:cut]))
     jpeg = pil_bytes(Image.fromarray(noisy), "JPEG")
-    with pytest.raises(InvalidTextureError):
+    with pytest.raises(InvalidTextureError, match="jpg' cannot be decoded"):
         decode_image(source(jpeg[:cut], "t.jpg"))
 
 
 def test_garbage_and_unsupported():
-    with pytest.raises(InvalidTextureError):
+    with pytest.raises(InvalidTextureError, match='cannot identify image file'):
         decode_image(source(b"not an image at all", "x.tga", "image/x-tga"))
     tiff = pil_bytes(Image.fromarray(RGB), "TIFF")
-    with pytest.raises(InvalidTextureError):
+    with pytest.raises(InvalidTextureError, match="tif' is a TIFF image, not a supported format"):
         decode_image(source(tiff, "x.tif", "image/tiff"))
     corrupt16 = raw_png(4, 4, 16, 2, b"\x00" * 3)
-    with pytest.raises(InvalidTextureError):
+    with pytest.raises(InvalidTextureError, match="png' is a corrupt or truncated PNG"):
         decode_image(source(corrupt16))
 
 

@@ -288,7 +288,7 @@ def test_max_size_drops_whole_levels():
     assert len(small.levels) == mip_level_count(250, 75)
     for a, b in zip(small.levels, full.levels[2:]):
         assert (a == b).all()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="max_size must be >= 1"):
         TextureOptions(max_size=0)
 
 
@@ -301,11 +301,11 @@ def test_input_not_modified_and_levels_read_only():
 
 
 def test_rejects_bad_input():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match='RGBA, got'):
         build_mip_chain(np.zeros((4, 4, 3), np.uint8), ROLE_BASE_COLOR)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="unknown texture role 'diffuse'"):
         build_mip_chain(np.zeros((4, 4, 4), np.uint8), "diffuse")
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="unknown alpha mode 'ADD'"):
         build_mip_chain(np.zeros((4, 4, 4), np.uint8), ROLE_BASE_COLOR, "ADD")
 
 

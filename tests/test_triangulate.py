@@ -123,9 +123,9 @@ def test_ear_clip_2d() -> None:
 
 
 def test_rejects_bad_shapes() -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match='points, got shape'):
         triangulate_polygons(np.zeros((2, 2, 3)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match='a polygon needs at least'):
         triangulate_polygon(np.zeros((2, 3)))
 
 

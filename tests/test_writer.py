@@ -66,7 +66,7 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
         raise OSError(5, "Input/output error")
 
     monkeypatch.setattr(writer.os, "chmod", bad_chmod)
-    with pytest.raises(OSError):
+    with pytest.raises(OSError, match="Input/output error"):
         write_atomic(p, b"new")
     assert p.read_bytes() == b"old"
     assert os.listdir(tmp_path) == ["M.json"]
