@@ -88,6 +88,11 @@ def test_a_bad_save_keeps_the_last_good_outputs_and_watching_goes_on(session):
     assert ev.report.failed == [] and ev.report.counts() == {"built": 1}
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 @pytest.mark.vulkan
 def test_cli_watch_with_preview_until_interrupted(tmp_path):
     src = tmp_path / "src"
@@ -98,9 +103,9 @@ def test_cli_watch_with_preview_until_interrupted(tmp_path):
                              "--preview", "-j", "1", "--debounce", "200"], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env,
                             # Ctrl-C as a shell's foreground job gets it: a process started with
-                            # SIGINT ignored (as a library in the test process may leave it)
-                            # keeps ignoring it, and Python installs no KeyboardInterrupt
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            # SIGINT ignored or blocked keeps it so, and Python then installs no
+                            # KeyboardInterrupt (the full suite hung here without this)
+                            preexec_fn=_default_sigint)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
 
