@@ -222,26 +222,20 @@ def _pair(v, i, f1, f2, a, b, c, wtri):
     (welded vertex ids ``wtri``, so also across a seam of split vertices) are cut by the plane
     through the edge halfway between their walls; others by the mid-plane of their points
     nearest to the cell's centroid. inf when the plane is unusable."""
-    # which corners of f1 does f2 have too
+    # which corners of f1 does f2 have too (bit j: corner j), without a heap array per call
+    mask = 0
     shared = 0
-    in2 = np.zeros(3, dtype=np.bool_)
     for j in range(3):
         for q in range(3):
             if wtri[f1, j] == wtri[f2, q]:
-                in2[j] = True
-        if in2[j]:
-            shared += 1
+                mask |= 1 << j
+                shared += 1
+                break
     if shared == 2:
         # the shared edge (e0, e1) in f1's corner order, f1's third corner o1, f2's o2
-        e = np.empty(2, dtype=np.int64)
-        n = 0
-        o1 = 0
-        for j in range(3):
-            if in2[j]:
-                e[n] = j
-                n += 1
-            else:
-                o1 = j
+        o1 = 0 if not mask & 1 else (1 if not mask & 2 else 2)
+        e0 = 1 if o1 == 0 else 0
+        e1 = 1 if o1 == 2 else 2
         o2 = 0
         for q in range(3):
             found = False
@@ -252,8 +246,8 @@ def _pair(v, i, f1, f2, a, b, c, wtri):
                 o2 = q
                 break
         # corner coordinates (the welded positions equal the triangles' own corners)
-        e0x, e0y, e0z = _corner(a, b, c, f1, e[0])
-        e1x, e1y, e1z = _corner(a, b, c, f1, e[1])
+        e0x, e0y, e0z = _corner(a, b, c, f1, e0)
+        e1x, e1y, e1z = _corner(a, b, c, f1, e1)
         o1x, o1y, o1z = _corner(a, b, c, f1, o1)
         o2x, o2y, o2z = _corner(a, b, c, f2, o2)
         edx, edy, edz = _unit(e1x - e0x, e1y - e0y, e1z - e0z)
@@ -276,17 +270,22 @@ def _pair(v, i, f1, f2, a, b, c, wtri):
         mx, my, mz = q1x - q2x, q1y - q2y, q1z - q2z
     if not (np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz)) or (mx == 0.0 and my == 0.0 and mz == 0.0):
         return np.inf
-    s = np.empty(3)
+    # signed side of each corner (>= 0: f1's side), as scalars: no heap array per call
+    s0 = (v[i, 0, 0] - ox) * mx + (v[i, 0, 1] - oy) * my + (v[i, 0, 2] - oz) * mz
+    s1 = (v[i, 1, 0] - ox) * mx + (v[i, 1, 1] - oy) * my + (v[i, 1, 2] - oz) * mz
+    s2 = (v[i, 2, 0] - ox) * mx + (v[i, 2, 1] - oy) * my + (v[i, 2, 2] - oz) * mz
     best = 0.0
     for j in range(3):
-        s[j] = (v[i, j, 0] - ox) * mx + (v[i, j, 1] - oy) * my + (v[i, j, 2] - oz) * mz
-        f = f1 if s[j] >= 0.0 else f2
+        sj = s0 if j == 0 else (s1 if j == 1 else s2)
+        f = f1 if sj >= 0.0 else f2
         best = max(best, _dist2(v[i, j, 0], v[i, j, 1], v[i, j, 2], a, b, c, f))
     for j in range(3):
         k = (j + 1) % 3
-        if (s[j] >= 0.0) != (s[k] >= 0.0):
-            den = s[j] - s[k]
-            t = s[j] / den if den != 0.0 else 0.0
+        sj = s0 if j == 0 else (s1 if j == 1 else s2)
+        sk = s0 if k == 0 else (s1 if k == 1 else s2)
+        if (sj >= 0.0) != (sk >= 0.0):
+            den = sj - sk
+            t = sj / den if den != 0.0 else 0.0
             t = min(max(t, 0.0), 1.0)
             x = v[i, j, 0] + t * (v[i, k, 0] - v[i, j, 0])
             y = v[i, j, 1] + t * (v[i, k, 1] - v[i, j, 1])
