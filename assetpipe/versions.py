@@ -8,10 +8,11 @@ IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate 
            # 4: meta has the bounding-box centre (--recenter)
 MESH = 4  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
           # 4: generated tangents are MikkTSpace (pipelines/tangents.py), w in glTF's convention
-LOD = 7  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
+LOD = 8  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
         # 7: the bound's kernels compiled (numba): same formulas, float64 rounding may differ in the last digits
+        # 8: nearest triangles from our float64 BVH (fcpw's float32 test misjudged slivers)
 TEXTURE = 3  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
@@ -21,7 +22,7 @@ STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE,
 
 
 _DISTS = ("numpy", "meshoptimizer", "DracoPy", "opencv-python-headless", "pillow",
-          "fcpw", "numba", "fast-simplification", "mapbox_earcut", "etcpak", "zstandard")
+          "numba", "fast-simplification", "mapbox_earcut", "etcpak", "zstandard")
 _cached: dict | None = None
 _memo_dir = None  # the build's cache folder (use_cache_dir); None: the default one
 

@@ -45,16 +45,15 @@ meshes are 0 apart. Degenerate triangles are fine (they count as segments or poi
 from __future__ import annotations
 
 import math
-from operator import attrgetter
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
+from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     convex_bound, lipschitz_bound, pair_bound, tri_distance)
 
-_PRIMITIVE = attrgetter("primitive_index")
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
 # The bound stops refining a direction once it is within this factor of the largest distance
@@ -220,51 +219,32 @@ def _closest_on_segment(p: np.ndarray, s: np.ndarray, e: np.ndarray) -> np.ndarr
 
 
 class _Engine:
-    """fcpw BVH over one mesh (local frame), exact float64 distances on its answers."""
+    """The BVH over one mesh (local frame): exact float64 nearest triangles
+    (:class:`pipelines.closest_point.ClosestTriangles`)."""
 
     def __init__(self, positions: np.ndarray, tri: np.ndarray) -> None:
-        import fcpw
+        self.tree = ClosestTriangles.build(positions, tri)
+        self.a, self.b, self.c = self.tree.a, self.tree.b, self.tree.c
 
-        self._fcpw = fcpw
-        self.a = np.ascontiguousarray(positions[tri[:, 0]], dtype=np.float64)
-        self.b = np.ascontiguousarray(positions[tri[:, 1]], dtype=np.float64)
-        self.c = np.ascontiguousarray(positions[tri[:, 2]], dtype=np.float64)
-        scene = fcpw.scene_3D()
-        scene.set_object_count(1)
-        scene.set_object_vertices(np.asfortranarray(positions, dtype=np.float32), 0)
-        scene.set_object_triangles(np.asfortranarray(tri, dtype=np.int32), 0)
-        scene.build(fcpw.aggregate_type.bvh_surface_area, True)
-        self.scene = scene
-
-    def _faces(self, pts32: np.ndarray, r2: np.ndarray) -> np.ndarray:
-        inter = self._fcpw.interaction_3D_list()
-        self.scene.find_closest_points(pts32, r2, inter)
-        # fcpw's binding has no array accessor: attrgetter in C is the cheapest way out (0.13 us
-        # a point here, against 0.15 for a generator expression)
-        return np.fromiter(map(_PRIMITIVE, inter), dtype=np.int64, count=pts32.shape[0])
-
-    def query(self, points: np.ndarray, radius: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(exact float64 distance to the triangle found (P,), that triangle (P,) int64).
+    def query(self, points: np.ndarray, radius: np.ndarray | None = None,
+              hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(exact float64 distance to the nearest triangle (P,), that triangle (P,) int64).
 
         ``radius`` (P,): a known upper value of each point's distance; it only prunes the
-        search (padded for float32 rounding; points found nothing within it are asked again
-        without a limit).
+        search (padded by a relative 1e-9 for the rounding of how it was computed; a point
+        that found nothing within it is asked again without a limit). ``hint`` (P,): a
+        triangle likely near, tried first (prunes sooner; the answer is the same).
         """
         n = points.shape[0]
         if n == 0:
             return np.zeros(0), np.zeros(0, dtype=np.int64)
-        pts32 = np.asfortranarray(points, dtype=np.float32)
-        if radius is None:
-            r2 = np.full(n, np.inf, dtype=np.float32)
-        else:
-            r = np.asarray(radius, dtype=np.float64) * (1.0 + 1e-4) + 1e-5
-            r2 = np.ascontiguousarray(np.where(np.isfinite(r), r * r, np.inf), dtype=np.float32)
-        faces = self._faces(pts32, r2)
+        if radius is not None:
+            radius = np.asarray(radius, dtype=np.float64) * (1.0 + 1e-9)
+        d, faces = self.tree.query(points, radius, hint)
         miss = faces < 0
         if miss.any():
-            faces[miss] = self._faces(np.asfortranarray(pts32[miss]),
-                                      np.full(int(miss.sum()), np.inf, dtype=np.float32))
-        return self.distance_to(points, faces), faces
+            d[miss], faces[miss] = self.tree.query(points[miss])
+        return d, faces
 
     def distance_to(self, points: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Exact distance from each point to the given triangle (not the nearest)."""
@@ -337,7 +317,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             break
         # the centroid's nearest triangle: usually the one whose plane the whole of T is near
         cen = v.mean(axis=1)
-        dc, fc = target.engine.query(cen, ub)
+        dc, fc = target.engine.query(cen, ub, hint)
         out.queries += k
         out.lower = max(out.lower, float(dc.max()))
         lower = max(lower, out.lower)
@@ -372,8 +352,10 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # an edge shared by two live cells has one midpoint (bit-identical: (a + b) / 2 is
         # symmetric): ask it once, with the smaller of the two radii (both are upper values)
         flat = np.ascontiguousarray(mids.reshape(-1, 3))
-        uniq, inv = np.unique(flat.view(np.dtype((np.void, 24))).reshape(-1), return_inverse=True)
+        uniq, first, inv = np.unique(flat.view(np.dtype((np.void, 24))).reshape(-1),
+                                     return_index=True, return_inverse=True)
         inv = inv.reshape(-1)
+        uhint = f.reshape(-1)[first]  # the triangle near the edge's first corner (ab: a, ...)
         urad = np.full(uniq.shape[0], np.inf)
         np.minimum.at(urad, inv, rad.reshape(-1))
         if out.queries + uniq.shape[0] > budget:
@@ -381,7 +363,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             out.converged = False
             v = v[:0]
             break
-        du, fu = target.engine.query(uniq.view(np.float64).reshape(-1, 3), urad)
+        du, fu = target.engine.query(uniq.view(np.float64).reshape(-1, 3), urad, uhint)
         out.queries += uniq.shape[0]
         dm, fm = du[inv].reshape(k, 3), fu[inv].reshape(k, 3)
         out.lower = max(out.lower, float(dm.max()))
