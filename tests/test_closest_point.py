@@ -120,3 +120,11 @@ def test_deep_unbalanced_input_keeps_the_tree_within_its_stack():
     pts = np.stack([np.geomspace(1e-300, 1e3, 300), np.full(300, 0.5), np.zeros(300)], 1)
     d, _ = ClosestTriangles.build(pos, tri).query(pts)
     np.testing.assert_array_equal(d, _brute(pts, pos, tri)[0])
+
+
+def test_non_finite_input_is_refused():
+    with pytest.raises(ValueError, match="non-finite triangle corners"):
+        ClosestTriangles.build(np.array([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), [[0, 1, 2]])
+    ct = ClosestTriangles.build(np.eye(3), [[0, 1, 2]])
+    with pytest.raises(ValueError, match="non-finite points"):
+        ct.query(np.array([[0.0, np.inf, 0.0]]))
