@@ -7,14 +7,15 @@ Method (deterministic)
    box and scaled to a unit diagonal, in float64. The same relative error then comes out for
    a model offset by 1e7 or scaled by 1e-6. Non-finite coordinates are refused
    (``ValueError``): the caller filters them before.
-2. Closest points come from fcpw's BVH (``find_closest_points``, float32 SIMD traversal). Its
-   float32 distance is not trusted: for every query the distance to the triangle it returned
-   is recomputed exactly in float64 (:func:`pipelines.distance_kernels.tri_distance`). That
-   value is the distance to *a* triangle of the mesh, hence never below the true distance:
-   every number the bound is built from is an upper value. The bound's inner arithmetic
-   (distances to given triangles, the Lipschitz, convexity and pair bounds below) runs in
-   compiled kernels (:mod:`pipelines.distance_kernels`); :func:`closest_point_on_triangles`
-   stays here in numpy as the independent reference the tests hold them to.
+2. Closest points come from our float64 BVH (:mod:`pipelines.closest_point`): every
+   distance it compares is the exact float64 point-triangle distance of
+   :func:`pipelines.distance_kernels.tri_distance`, so the triangle it returns is the nearest
+   up to float64 rounding, and the value is the distance to *a* triangle of the mesh, hence
+   never below the true distance: every number the bound is built from is an upper value. The
+   bound's inner arithmetic (distances to given triangles, the Lipschitz, convexity and pair
+   bounds below) runs in compiled kernels (:mod:`pipelines.distance_kernels`);
+   :func:`closest_point_on_triangles` stays here in numpy as the independent reference the
+   tests hold them to.
 3. One direction, A -> B (reference -> level: what was lost; level -> reference: what was
    added), is bounded by branch and bound over A's triangles. ``d_B`` (distance to B) is
    1-Lipschitz, so on a triangle T with corner values ``d_i``
@@ -30,8 +31,7 @@ Method (deterministic)
    bound of any settled or remaining triangle: an *upper bound*, within ``(1 + tolerance)``
    of the true maximum when ``converged``.
 4. ``hausdorff`` is the larger of the two directions' upper bounds; ``hausdorff_lower`` the
-   largest distance evaluated (a lower bound up to the float32 engine's choice of triangle:
-   within about 1e-7 of the diagonal). Triangles both meshes share (same three vertices,
+   largest distance evaluated (a lower bound up to float64 rounding). Triangles both meshes share (same three vertices,
    :func:`measure_levels`) are 0 apart and skipped; so are shared vertices.
 5. ``rms`` is an *estimate*: ``sqrt((mean_ab + mean_ba) / 2)`` of the squared distances of
    ``samples`` area-weighted random points per side (fixed seed), the mean of the two
@@ -590,12 +590,10 @@ def measure_error(
 
 
 def points_to_mesh_distance(points: np.ndarray, positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """Exact distance from each point to the nearest triangle (fcpw BVH, float64 recheck).
+    """Exact distance from each point to the nearest triangle (float64 BVH).
 
     Args: points (P, 3), positions (N, 3), indices (M, 3) with M >= 1. Returns (P,) float64.
-    The BVH runs in float32 in the mesh's local frame; the distance to the triangle it finds
-    is recomputed in float64 (never below the true distance; above it by at most the float32
-    search's slack, about 1e-7 of the mesh's diagonal).
+    Computed in the mesh's local frame (centred, unit diagonal), in float64 throughout.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if p.shape[0] == 0:
