@@ -96,8 +96,11 @@ def pad_to_blocks(level: np.ndarray) -> np.ndarray:
     return np.pad(level, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge")
 
 
-BC7_MAX_PARTITIONS = 8
+BC7_MAX_PARTITIONS = 4
 """Mode-1 partitions etcpak's BC7 encoder tries (0..64); see :func:`_bc7_params`."""
+
+BC7_LEAST_SQUARES = False
+"""Whether etcpak's BC7 encoder refines endpoints by least squares; see :func:`_bc7_params`."""
 
 
 def _bc7_params():
@@ -106,12 +109,16 @@ def _bc7_params():
     p = etcpak.BC7CompressBlockParams()
     # Plain RGB error weights instead of etcpak's perceptual default ([128, 64, 16, 32], YCbCr):
     # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
-    # metric); uber level 0 (etcpak's default). Mode 1 tries 8 of the 64 partitions instead of
-    # all: on the 29 corpus colour level 0s 0.57x the CPU time for 1.0 dB lower mean PSNR
-    # (55.8 -> 54.8 dB) and worst 40.05 dB instead of 40.28 (SpiderTex.jpg; goal 38); 16
-    # partitions: 0.72x, worst 40.22; 4: 0.51x, worst 39.90 (benchmarks/textures.py, section 5).
+    # metric); uber level 0 (etcpak's default). Mode 1 tries 4 of its 64 partitions and the
+    # least-squares endpoint refinement is off: BC7 is most of the `bc` build's time, and on
+    # the corpus' colour levels this is 0.67x the CPU time of 8 partitions with least squares
+    # (the previous setting), level-0 PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
+    # (SpiderTex.jpg; was 40.05; goals 38 photographic, 36 all). 2 partitions without least
+    # squares: 0.54x, worst 39.25 dB; no mode 1 at all: worst 36.44 dB (benchmarks/textures.py,
+    # section 5).
     p.init_linear_weights()
     p.m_max_partitions = BC7_MAX_PARTITIONS
+    p.m_try_least_squares = BC7_LEAST_SQUARES
     return p
 
 
