@@ -628,7 +628,10 @@ def main() -> None:
     import etcpak
 
     from importlib.metadata import version
-    print(f"etcpak {version('etcpak')}, texture2ddecoder {version('texture2ddecoder')}, "
+    from assetpipe.pipelines.texture_compress import etcpak_variant
+
+    print(f"etcpak {version('etcpak')} (ETC2/EAC from its {etcpak_variant()} build), "
+          f"texture2ddecoder {version('texture2ddecoder')}, "
           f"zstandard {version('zstandard')}; corpus {CORPUS}")
     textures = corpus_textures(args.quick)
     load0 = os.getloadavg()[0]
