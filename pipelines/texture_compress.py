@@ -111,10 +111,10 @@ def etc_module():
     ABI, every Python >= 3.7), but only the portable module has the ``.abi3.so`` suffix; the
     SIMD modules are named ``.cpython-37m-x86_64-linux-gnu.so``, which no Python >= 3.8 imports,
     so etcpak silently runs its portable build. The SIMD files use only stable-ABI symbols
-    (``nm -D``: the same 23 as the portable one), so they are loaded here by path. On the
+    (``nm -D``: the same 23 as the portable one), so they are loaded here by path. On
     Avocado_normal.png (2048^2) the AVX2 build encodes EAC RG11 in 0.045 s instead of 1.49 s
     (CPU) and ETC2 RGB in 0.021 s instead of 0.064 s; the whole `etc2` build of the corpus went
-    from 3.0x to 1.0x the CPU time of the uncompressed build. Its blocks differ (the same
+    from 3.0x to 1.1x the CPU time of the uncompressed build. Its blocks differ (the same
     method, vectorised, with its own heuristics): on the corpus' level 0s normal maps and
     occlusion are unchanged, colour within -1.67 dB (Correct.png, 31.45 -> 29.78; the checker
     textures -1.5 to -1.6 dB) and +0.53 dB (Arrow.png), the same 18 of 34 textures at >= 36 dB
@@ -122,7 +122,8 @@ def etc_module():
     module: BC7 (bc7enc, scalar) is no faster there, and the AVX2 module's
     ``init_linear_weights`` BC7 came out at 34.4 dB instead of 41.1 dB on a test texture; BC4/BC5
     take 0.02 s per 2048^2 anyway. When etcpak loaded a SIMD build itself, or none loads,
-    etcpak's own choice is used.
+    etcpak's own choice is used (a future etcpak that loads its AVX2 module for BC7 too would
+    meet that BC7 result: the tests hold BC7's level 0 to the 38 dB goal).
     """
     global _etc_module
     if _etc_module is None:
@@ -192,11 +193,11 @@ def _bc7_params():
     # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
     # metric); uber level 0 (etcpak's default). Mode 1 tries 4 of its 64 partitions and the
     # least-squares endpoint refinement is off: BC7 is most of the `bc` build's time, and on
-    # the corpus' colour levels this is 0.67x the CPU time of 8 partitions with least squares
-    # (the previous setting), level-0 PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
+    # the corpus' colour level 0s this is 0.62x the CPU time of 8 partitions with least squares
+    # (the previous setting; 0.40x of all 64), PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
     # (SpiderTex.jpg; was 40.05; goals 38 photographic, 36 all). 2 partitions without least
-    # squares: 0.54x, worst 39.25 dB; no mode 1 at all: worst 36.44 dB (benchmarks/textures.py,
-    # section 5).
+    # squares: 0.55x, worst 39.25 dB; no mode 1 at all: 0.31x, worst 36.44 dB
+    # (benchmarks/textures.py, section 5).
     p.init_linear_weights()
     p.m_max_partitions = BC7_MAX_PARTITIONS
     p.m_try_least_squares = BC7_LEAST_SQUARES
