@@ -193,10 +193,10 @@ def _bc7_params():
     # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
     # metric); uber level 0 (etcpak's default). Mode 1 tries 4 of its 64 partitions and the
     # least-squares endpoint refinement is off: BC7 is most of the `bc` build's time, and on
-    # the corpus' colour level 0s this is 0.62x the CPU time of 8 partitions with least squares
-    # (the previous setting; 0.40x of all 64), PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
+    # the corpus' colour level 0s this is 0.64x the CPU time of 8 partitions with least squares
+    # (the previous setting; 0.39x of all 64), PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
     # (SpiderTex.jpg; was 40.05; goals 38 photographic, 36 all). 2 partitions without least
-    # squares: 0.55x, worst 39.25 dB; no mode 1 at all: 0.31x, worst 36.44 dB
+    # squares: 0.56x, worst 39.25 dB; no mode 1 at all: 0.34x, worst 36.44 dB
     # (benchmarks/textures.py, section 5).
     p.init_linear_weights()
     p.m_max_partitions = BC7_MAX_PARTITIONS
