@@ -46,8 +46,8 @@ from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_META
 from assetpipe.pipelines.texture_options import TEXTURE_CODECS  # noqa: F401 (re-exported)
 
 __all__ = ["TEXTURE_CODECS", "CompressedChain", "choose_format", "compress_chain", "compress_level", "decode_level",
-           "decode_normals", "level_quality", "mean_angle_degrees", "pad_to_blocks", "psnr", "rebuild_normal_z",
-           "stored_channels"]
+           "decode_normals", "etc_module", "etcpak_variant", "level_quality", "mean_angle_degrees", "pad_to_blocks",
+           "psnr", "rebuild_normal_z", "stored_channels"]
 
 def choose_format(codec: str, role: str, srgb: bool, has_alpha: bool) -> BlockFormat:
     """The block format for ``role`` under ``codec`` (``"bc"`` or ``"etc2"``), see the table above.
@@ -96,8 +96,93 @@ def pad_to_blocks(level: np.ndarray) -> np.ndarray:
     return np.pad(level, ((0, -h % 4), (0, -w % 4), (0, 0)), mode="edge")
 
 
-BC7_MAX_PARTITIONS = 8
+_SIMD_VARIANTS = (("avx512", ("avx512bw", "avx512vl")), ("avx2", ("avx2",)), ("sse41", ("sse4_1",)))
+"""etcpak's x86 builds, best first, with the CPU features each needs (as etcpak's __init__)."""
+
+_etc_module = None
+
+
+def etc_module():
+    """The etcpak extension module the ETC2/EAC encoders run in: the build for this CPU's SIMD
+    level (BC4/BC5/BC7 use ``etcpak`` as it imports itself, see below).
+
+    etcpak picks ``_etcpak_avx512``/``_avx2``/``_sse41`` by CPU feature and falls back to its
+    portable ``_etcpak_none`` on ImportError. Its 0.9.15 wheel is tagged ``cp37-abi3`` (stable
+    ABI, every Python >= 3.7), but only the portable module has the ``.abi3.so`` suffix; the
+    SIMD modules are named ``.cpython-37m-x86_64-linux-gnu.so``, which no Python >= 3.8 imports,
+    so etcpak silently runs its portable build. The SIMD files use only stable-ABI symbols
+    (``nm -D``: the same 23 as the portable one), so they are loaded here by path. On
+    Avocado_normal.png (2048^2) the AVX2 build encodes EAC RG11 in 0.045 s instead of 1.49 s
+    (CPU) and ETC2 RGB in 0.021 s instead of 0.064 s; the whole `etc2` build of the corpus went
+    from 3.0x to 1.1x the CPU time of the uncompressed build. Its blocks differ (the same
+    method, vectorised, with its own heuristics): on the corpus' level 0s normal maps and
+    occlusion are unchanged, colour within -1.67 dB (Correct.png, 31.45 -> 29.78; the checker
+    textures -1.5 to -1.6 dB) and +0.53 dB (Arrow.png), the same 18 of 34 textures at >= 36 dB
+    (benchmarks/textures.py, one run each way). BC7 and BC4/BC5 stay on etcpak's own
+    module: BC7 (bc7enc, scalar) is no faster there, and the AVX2 module's
+    ``init_linear_weights`` BC7 came out at 34.4 dB instead of 41.1 dB on a test texture; BC4/BC5
+    take 0.02 s per 2048^2 anyway. When etcpak loaded a SIMD build itself, or none loads,
+    etcpak's own choice is used (a future etcpak that loads its AVX2 module for BC7 too would
+    meet that BC7 result: the tests hold BC7's level 0 to the 38 dB goal).
+    """
+    global _etc_module
+    if _etc_module is None:
+        import sys  # noqa: PLC0415
+
+        import etcpak  # noqa: PLC0415 - a native library, loaded only when compressing
+
+        module = etcpak
+        if not any(f"etcpak._etcpak_{name}" in sys.modules for name, _ in _SIMD_VARIANTS):
+            module = _load_simd_variant(etcpak) or etcpak
+        _etc_module = module
+    return _etc_module
+
+
+def _load_simd_variant(etcpak):
+    """The best etcpak SIMD build this CPU runs, loaded from its file, or None."""
+    import importlib.machinery  # noqa: PLC0415
+    import importlib.util  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    try:
+        features = set(etcpak.local_host.features)  # archspec's view of this CPU, as etcpak's __init__
+    except Exception:  # noqa: BLE001 - no feature list: keep etcpak's choice
+        return None
+    folder = Path(etcpak.__file__).parent
+    for name, needs in _SIMD_VARIANTS:
+        if not set(needs) <= features:
+            continue
+        for path in sorted(folder.glob(f"_etcpak_{name}.*.so")):
+            try:
+                full = f"etcpak._etcpak_{name}"
+                loader = importlib.machinery.ExtensionFileLoader(full, str(path))
+                spec = importlib.util.spec_from_file_location(full, str(path), loader=loader)
+                module = importlib.util.module_from_spec(spec)
+                loader.exec_module(module)
+            except (ImportError, OSError):
+                continue
+            if hasattr(module, "compress_eac_rg") and hasattr(module, "BC7CompressBlockParams"):
+                return module
+    return None
+
+
+def etcpak_variant() -> str:
+    """Which etcpak build encodes ETC2/EAC: ``avx512``, ``avx2``, ``sse41``, ``neon`` or ``none``
+    (portable)."""
+    spec = getattr(etc_module(), "__spec__", None)
+    name = spec.name if spec is not None else ""
+    if name.startswith("etcpak._etcpak_"):
+        return name.rsplit("_", 1)[1]
+    import sys  # noqa: PLC0415
+
+    return next((n for n in ("avx512", "avx2", "sse41", "neon") if f"etcpak._etcpak_{n}" in sys.modules), "none")
+
+
+BC7_MAX_PARTITIONS = 4
 """Mode-1 partitions etcpak's BC7 encoder tries (0..64); see :func:`_bc7_params`."""
+
+BC7_LEAST_SQUARES = False
+"""Whether etcpak's BC7 encoder refines endpoints by least squares; see :func:`_bc7_params`."""
 
 
 def _bc7_params():
@@ -106,17 +191,23 @@ def _bc7_params():
     p = etcpak.BC7CompressBlockParams()
     # Plain RGB error weights instead of etcpak's perceptual default ([128, 64, 16, 32], YCbCr):
     # on the corpus colour textures about 3x faster and 0.5-2.3 dB higher RGB PSNR (the goal's
-    # metric); uber level 0 (etcpak's default). Mode 1 tries 8 of the 64 partitions instead of
-    # all: on the 29 corpus colour level 0s 0.57x the CPU time for 1.0 dB lower mean PSNR
-    # (55.8 -> 54.8 dB) and worst 40.05 dB instead of 40.28 (SpiderTex.jpg; goal 38); 16
-    # partitions: 0.72x, worst 40.22; 4: 0.51x, worst 39.90 (benchmarks/textures.py, section 5).
+    # metric); uber level 0 (etcpak's default). Mode 1 tries 4 of its 64 partitions and the
+    # least-squares endpoint refinement is off: BC7 is most of the `bc` build's time, and on
+    # the corpus' colour level 0s this is 0.64x the CPU time of 8 partitions with least squares
+    # (the previous setting; 0.39x of all 64), PSNR mean 53.95 dB (was 54.84), worst 39.47 dB
+    # (SpiderTex.jpg; was 40.05; goals 38 photographic, 36 all). 2 partitions without least
+    # squares: 0.56x, worst 39.25 dB; no mode 1 at all: 0.34x, worst 36.44 dB
+    # (benchmarks/textures.py, section 5).
     p.init_linear_weights()
     p.m_max_partitions = BC7_MAX_PARTITIONS
+    p.m_try_least_squares = BC7_LEAST_SQUARES
     return p
 
 
 def _encoder(vk_format: int):
     import etcpak  # noqa: PLC0415 - a native library, loaded only when compressing
+
+    etc = etc_module()
 
     if vk_format in (VK_FORMAT_BC7_UNORM_BLOCK, VK_FORMAT_BC7_SRGB_BLOCK):
         params = _bc7_params()
@@ -124,12 +215,12 @@ def _encoder(vk_format: int):
     return {
         VK_FORMAT_BC4_UNORM_BLOCK: etcpak.compress_bc4,
         VK_FORMAT_BC5_UNORM_BLOCK: etcpak.compress_bc5,
-        VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK: etcpak.compress_etc2_rgb,
-        VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK: etcpak.compress_etc2_rgb,
-        VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK: etcpak.compress_etc2_rgba,
-        VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK: etcpak.compress_etc2_rgba,
+        VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK: etc.compress_etc2_rgb,
+        VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK: etc.compress_etc2_rgb,
+        VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK: etc.compress_etc2_rgba,
+        VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK: etc.compress_etc2_rgba,
         VK_FORMAT_EAC_R11_UNORM_BLOCK: _eac_r11,
-        VK_FORMAT_EAC_R11G11_UNORM_BLOCK: etcpak.compress_eac_rg,
+        VK_FORMAT_EAC_R11G11_UNORM_BLOCK: etc.compress_eac_rg,
     }[vk_format]
 
 
@@ -138,9 +229,7 @@ def _eac_r11(data: bytes, w: int, h: int) -> bytes:
     buffer of 16 bytes per block of which the first half holds the 8-byte R11 blocks in order
     (byte-identical to the R half of ``compress_eac_rg``'s blocks, at half its time: 0.28 s vs
     0.57 s CPU on 1024x1024); the rest is not written by the encoder and is dropped."""
-    import etcpak  # noqa: PLC0415
-
-    return etcpak.compress_eac_r(data, w, h)[: w * h // 2]
+    return etc_module().compress_eac_r(data, w, h)[: w * h // 2]
 
 
 def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:

@@ -41,9 +41,11 @@ class TextureOptions:
     max_pixels: int = 16384 * 16384
     compression: str = "none"
     supercompression: str = "none"
-    # 3: the corpus' BC blocks to 0.407 of their size at 30 MB/s; level 19 gives 0.368 at 0.8 MB/s
-    # (slower than the BC7 encoder itself); benchmarks/textures.py, section 'zstd levels'.
-    zstd_level: int = 3
+    # 1: the corpus' BC blocks to 0.433 of their size at 384 MB/s, level 3 to 0.406 at 200 MB/s
+    # (the 2x time for 6% smaller files is 0.04x of the uncompressed build's time, the size goal
+    # has a 2x margin); level 19 gives 0.366 at 1.9 MB/s (slower than the BC7 encoder itself);
+    # benchmarks/textures.py, section 'zstd levels'.
+    zstd_level: int = 1
     oversize: str = "downscale"
 
     def __post_init__(self) -> None:
