@@ -185,8 +185,9 @@ class Graph:
 
     # -- keys ---------------------------------------------------------------------------
     def _key_inputs(self, step: str, inputs: dict, opts) -> dict:
+        libs = steps.texture_key_libs(self.libs, opts) if step == "texture" else self.libs
         return {"step": step, "version": versions.STEP_VERSIONS[step], "inputs": inputs, "options": opts,
-                "libs": self.libs}
+                "libs": libs}
 
     def _run_phase(self, jobs: list[tuple[list[AssetState], str, dict, tuple]], accept=None,
                    with_record=None, costs: list[float] | None = None) -> dict[str, dict | None]:

@@ -177,7 +177,7 @@ class SceneRun:
             image = {"name": ob.texture.name, "mime": mime, "digest": digest, "path": ob.texture.name}
             kin = {"step": "texture", "version": versions.STEP_VERSIONS["texture"],
                    "inputs": {"image": digest, "role": "baseColor", "alphaMode": "OPAQUE", "alphaCutoff": 0.5},
-                   "options": tex_opts, "libs": versions.library_versions()}
+                   "options": tex_opts, "libs": steps.texture_key_libs(versions.library_versions(), tex_opts)}
             key = digest_json(kin)
             rec = store.get_record(key)
             if rec is None:

@@ -301,6 +301,18 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
 
 # -- textures -------------------------------------------------------------------------------
 
+def texture_key_libs(libs: dict, tex_opts: dict | None) -> dict:
+    """The library versions a texture step's key holds: ``libs``, plus for ETC2 the etcpak
+    build that encodes it (``avx512``/``avx2``/``sse41``/``none``): those builds write different
+    (equally valid) blocks, so a cache shared by machines with different CPUs must not mix them.
+    BC and RGBA8 output does not depend on the CPU (etcpak's own module, numpy, OpenCV)."""
+    if (tex_opts or {}).get("compression") != "etc2":
+        return libs
+    from assetpipe.pipelines.texture_compress import etcpak_variant  # noqa: PLC0415
+
+    return {**libs, "etcpak-build": etcpak_variant()}
+
+
 def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_mode: str,
                  alpha_cutoff: float, texture_options: dict) -> dict:
     from assetpipe.core.errors import MissingFileError
