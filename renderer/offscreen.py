@@ -32,6 +32,7 @@ from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
 
 TEXTURE_SLOTS = 16
+MATERIAL_FLOATS = 12  # the shader's Material: baseColor, params, roles (three vec4, std430)
 VERTEX_STRIDE = 36  # position (3) + uv (2) + colour (4) float32
 PUSH_SIZE = 112     # mat4 + vec4 + vec4 + ivec4
 COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
@@ -272,7 +273,7 @@ class Renderer:
         vb.write(verts)
         ib = ctx.create_buffer(model.indices.nbytes, vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
         ib.write(model.indices.astype(np.uint32))
-        mat_rows = np.zeros((max(len(model.materials), 1), 8), np.float32)
+        mat_rows = np.zeros((max(len(model.materials), 1), MATERIAL_FLOATS), np.float32)
         mat_rows[:, :4] = 1.0
         for i, m in enumerate(model.materials):
             mat_rows[i, :4] = m.base_color
@@ -286,7 +287,9 @@ class Renderer:
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
         by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
         for i, m in enumerate(model.materials):
-            texs = [t for t in (m.texture, m.normal_texture) if t is not None]
+            roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
+                     m.emissive_texture)
+            texs = [t for t in roles if t is not None]
             if len(by_set[-1]) + len(texs) > per_set:  # a material's textures share one set
                 by_set.append([])
             placed = []
@@ -295,14 +298,17 @@ class Renderer:
                 samplers.append(self._make_sampler(t.sampler, len(t.levels)))
                 by_set[-1].append(len(images) - 1)
                 placed.append(len(by_set[-1]))
+            slot_of = dict(zip([k for k, t in enumerate(roles) if t is not None], placed))
             s_idx = len(by_set) - 1
-            base_slot = placed[0] if m.texture is not None else 0
-            slots.append((s_idx if m.texture is not None or m.normal_texture is not None else 0, base_slot))
+            base_slot = slot_of.get(0, 0)
+            slots.append((s_idx if texs else 0, base_slot))
             if m.normal_texture is not None:  # the shader reads the normal map's slot and channel count
-                mat_rows[i, 6] = placed[-1]
+                mat_rows[i, 6] = slot_of[1]
                 fmt = m.normal_texture.vk_format
                 two = fmt in (VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK)
                 mat_rows[i, 7] = 2.0 if two else 1.0
+            for k in (2, 3, 4):  # metallic-roughness, occlusion, emissive slots (0: not drawn)
+                mat_rows[i, 6 + k] = slot_of.get(k, 0)
         mb.write(mat_rows)
         n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(

@@ -10,6 +10,7 @@ describe is drawn white.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +37,14 @@ def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
 
 
 def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
-                 decoded: dict[str, Any] | None = None,
+                 decoded: dict[str, Any] | None = None, skip_roles: set[str] | None = None,
+                 sampler_of: dict[str, dict[str, dict[str, Any]]] | None = None,
                  ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
-    """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry."""
+    """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry.
+    Every texture role trimesh reads is drawn (on TEXCOORD_0, the only UV set trimesh reads) but
+    those in ``skip_roles`` (a source material samples them from another UV set), each with a mip
+    chain of its own and, when ``sampler_of`` names the material (glTF, unique material names), the
+    glTF sampler of that role (wrap modes and filters); else trilinear, repeating."""
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
     n = len(geom.vertices)
@@ -71,38 +77,54 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
             if fa.dtype.kind in "ui" or fa.max(initial=0) > 1.0:
                 fa = fa / 255.0
             factor = tuple(float(x) for x in np.r_[fa, [1.0] * 4][:4])  # type: ignore[assignment]
+        kw = getattr(mat, "kwargs", None) or {}
+        if getattr(mat, "baseColorFactor", None) is None and ("d" in kw or "tr" in kw):
+            # an MTL's dissolve (d, or Tr = 1 - d), which trimesh keeps but does not apply
+            try:
+                raw = kw["d"] if "d" in kw else kw["tr"]
+                d = float((raw if isinstance(raw, (list, tuple)) else [raw])[0])
+                d = d if "d" in kw else 1.0 - d
+                factor = (*factor[:3], min(max(d, 0.0), 1.0))  # type: ignore[assignment]
+            except (TypeError, ValueError, IndexError):
+                pass
         image = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
         alpha_mode = str(getattr(mat, "alphaMode", None) or ("BLEND" if factor[3] < 1.0 else "OPAQUE"))
         cutoff = float(getattr(mat, "alphaCutoff", None) or 0.5)
         double_sided = bool(getattr(mat, "doubleSided", False))
-    texture = None
-    if image is not None and uv is not None and images is not None and id(image) in images:
-        texture = images[id(image)]
-    elif image is not None and uv is not None:
+    skip = skip_roles or set()
+    samplers = (sampler_of or {}).get(str(getattr(mat, "name", None))) if mat is not None else None
+
+    def role_texture(img: Any, role: str) -> Texture | None:
+        """The source image of ``role`` with a mip chain of its own (:mod:`renderer.ref_mips`)."""
+        if img is None or uv is None or role in skip:
+            return None
+        key = (id(img), role)
+        sampler = (samplers or {}).get(role)
+        if images is not None and key in images:  # type: ignore[operator]
+            tex = images[key]  # type: ignore[index]
+            return dataclasses.replace(tex, sampler=sampler) if sampler else tex
         try:
-            rgba = _rgba_of(image, decoded)
-            texture = Texture(name=f"{name} source image", levels=[rgba], vk_format=VK_FORMAT_R8G8B8A8_SRGB,
-                              sampler={"minFilter": 9729}, from_ktx2=False)
-            if images is not None:
-                images[id(image)] = texture
+            from .ref_mips import mip_chain  # noqa: PLC0415
+
+            fmt = VK_FORMAT_R8G8B8A8_SRGB if role in ("baseColor", "emissive") else VK_FORMAT_R8G8B8A8_UNORM
+            tex = Texture(name=f"{name} source {role}", levels=mip_chain(_rgba_of(img, decoded), role),
+                          vk_format=fmt, sampler={"minFilter": 9987}, from_ktx2=False)
         except Exception as exc:  # noqa: BLE001
-            notes.append(f"{name}: source image not usable ({exc})")
-    normal = None
-    nimage = getattr(mat, "normalTexture", None) if mat is not None else None
-    if nimage is not None and uv is not None:  # level 0 only, as UNORM data (the shaded check draws it)
-        key = (id(nimage), "normal")
-        try:
-            if images is not None and key in images:  # type: ignore[operator]
-                normal = images[key]  # type: ignore[index]
-            else:
-                normal = Texture(name=f"{name} source normal map", levels=[_rgba_of(nimage, decoded)],
-                                 vk_format=VK_FORMAT_R8G8B8A8_UNORM, sampler={"minFilter": 9729}, from_ktx2=False)
-                if images is not None:
-                    images[key] = normal  # type: ignore[index]
-        except Exception as exc:  # noqa: BLE001
-            notes.append(f"{name}: source normal map not usable ({exc})")
+            notes.append(f"{name}: source {role} image not usable ({exc})")
+            return None
+        if images is not None:
+            images[key] = tex  # type: ignore[index]
+        return dataclasses.replace(tex, sampler=sampler) if sampler else tex
+
+    def attr(a: str) -> Any:
+        return getattr(mat, a, None) if mat is not None else None
+
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
-                     double_sided=double_sided, texture=texture, normal_texture=normal), uv, colors)
+                     double_sided=double_sided, texture=role_texture(image, "baseColor"),
+                     normal_texture=role_texture(attr("normalTexture"), "normal"),
+                     metallic_roughness_texture=role_texture(attr("metallicRoughnessTexture"), "metallicRoughness"),
+                     occlusion_texture=role_texture(attr("occlusionTexture"), "occlusion"),
+                     emissive_texture=role_texture(attr("emissiveTexture"), "emissive")), uv, colors)
 
 
 def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
@@ -145,6 +167,11 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
     materials: list[Material] = [Material(id="flat")] if flat else []
     mat_cache: dict[str, tuple[int, Any, Any]] = {}
     image_cache: dict[int, Texture] = {}
+    skip = other_uv_roles(path)
+    samplers = role_samplers(path)
+    if skip:
+        notes.append(f"the source samples {sorted(skip)} from another UV set than TEXCOORD_0 (trimesh reads "
+                     "TEXCOORD_0 only): not drawn")
     base = first = 0
     for k, (transform, gname, g) in enumerate(instances):
         v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]
@@ -157,7 +184,7 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         elif gname in mat_cache:
             mat_index, uv, col = mat_cache[gname]
         else:
-            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded)
+            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded, skip, samplers)
             mat_index = len(materials)
             materials.append(mat)
             mat_cache[gname] = (mat_index, uv, col)
@@ -178,7 +205,31 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
                        colors=np.concatenate(colors).astype(np.float32),
                        indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
-                       radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)
+                       radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent,
+                       sidecar={"undrawnRoles": sorted(skip)})
+
+
+# glTF material texture slots by the sidecar's role names
+GLTF_ROLE_PATHS = {"baseColor": (("pbrMetallicRoughness", "baseColorTexture"),
+                                 ("extensions", "KHR_materials_pbrSpecularGlossiness", "diffuseTexture")),
+                   "metallicRoughness": (("pbrMetallicRoughness", "metallicRoughnessTexture"),),
+                   "normal": (("normalTexture",),), "occlusion": (("occlusionTexture",),),
+                   "emissive": (("emissiveTexture",),)}
+
+
+def other_uv_roles(path: Path) -> set[str]:
+    """The roles some material of the glTF at ``path`` samples from a UV set other than TEXCOORD_0."""
+    doc = _gltf_json(path)
+    out: set[str] = set()
+    for mat in (doc or {}).get("materials") or []:
+        for role, paths in GLTF_ROLE_PATHS.items():
+            for keys in paths:
+                node: Any = mat
+                for k in keys:
+                    node = node.get(k) if isinstance(node, dict) else None
+                if isinstance(node, dict) and int(node.get("texCoord", 0) or 0) != 0:
+                    out.add(role)
+    return out
 
 
 def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
@@ -302,3 +353,31 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
         colour = False
         notes.append("trimesh loaded none of the source's textures: colours not compared")
     return geometry, colour, notes
+
+
+def role_samplers(path: Path) -> dict[str, dict[str, dict[str, Any]]]:
+    """{material name: {role: glTF sampler}} of the glTF at ``path``, for the materials whose name
+    is unique (trimesh keeps a material's name, not its index, nor its samplers). A role without a
+    sampler gets glTF's default (repeat, the viewer's choice of filter: trilinear here)."""
+    doc = _gltf_json(path) or {}
+    mats = doc.get("materials") or []
+    names = [str(m.get("name")) for m in mats if isinstance(m, dict) and m.get("name") is not None]
+    textures, samplers = doc.get("textures") or [], doc.get("samplers") or []
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for mat in mats:
+        if not isinstance(mat, dict) or mat.get("name") is None or names.count(str(mat["name"])) != 1:
+            continue
+        roles: dict[str, dict[str, Any]] = {}
+        for role, paths in GLTF_ROLE_PATHS.items():
+            for keys in paths:
+                node: Any = mat
+                for k in keys:
+                    node = node.get(k) if isinstance(node, dict) else None
+                if isinstance(node, dict) and isinstance(node.get("index"), int) and 0 <= node["index"] < len(textures):
+                    si = (textures[node["index"]] or {}).get("sampler")
+                    smp = dict(samplers[si]) if isinstance(si, int) and 0 <= si < len(samplers) else {}
+                    smp.setdefault("minFilter", 9987)
+                    roles[role] = smp
+                    break
+        out[str(mat["name"])] = roles
+    return out
