@@ -95,12 +95,18 @@ class Renderer:
         t0 = time.perf_counter()
         self._vert = self._module(compile_glsl(shader_path("mesh.vert"), shader_cache))
         self._frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache))
+        self._lean_vert = self._module(compile_glsl(shader_path("lean.vert"), shader_cache))
+        self._lean_frag = self._module(compile_glsl(shader_path("lean.frag"), shader_cache))
         self.timings["compile"] = time.perf_counter() - t0
         self._make_layouts()
         self._pipelines: dict[tuple[bool, bool], Any] = {}
         for cull in (False, True):
             for blend in (False, True):
                 self._pipelines[(cull, blend)] = self._make_pipeline(cull, blend)
+        # coverage, silhouette and facing: position only, no varyings (lean.vert/lean.frag). lavapipe
+        # sets up every triangle's attribute planes: MetalRoughSpheresNoTextures' facing renders of
+        # 1.04M triangles cost about half as much without them (see docs/VALIDATE.md, "Speed")
+        self._lean = {cull: self._make_pipeline(cull, False, lean=True) for cull in (False, True)}
         self.white = self._upload_texture(Texture("white", [np.full((1, 1, 4), 255, np.uint8)], 37))
         self.white_sampler = self._make_sampler({}, 1)
         self.resize(width, height)
@@ -128,12 +134,13 @@ class Renderer:
             setLayoutCount=1, pSetLayouts=[self.set_layout], pushConstantRangeCount=1,
             pPushConstantRanges=[push]), None)
 
-    def _make_pipeline(self, cull: bool, blend: bool) -> Any:
+    def _make_pipeline(self, cull: bool, blend: bool, lean: bool = False) -> Any:
         vk = self.vk
         stages = [
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT, module=self._vert, pName="main"),
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT, module=self._frag,
-                                               pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT,
+                                               module=self._lean_vert if lean else self._vert, pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT,
+                                               module=self._lean_frag if lean else self._frag, pName="main"),
         ]
         binding = vk.VkVertexInputBindingDescription(binding=0, stride=VERTEX_STRIDE,
                                                      inputRate=vk.VK_VERTEX_INPUT_RATE_VERTEX)
@@ -145,6 +152,8 @@ class Renderer:
             vk.VkVertexInputAttributeDescription(location=2, binding=0, format=vk.VK_FORMAT_R32G32B32A32_SFLOAT,
                                                  offset=20),
         ]
+        if lean:
+            attrs = attrs[:1]
         vertex_input = vk.VkPipelineVertexInputStateCreateInfo(
             vertexBindingDescriptionCount=1, pVertexBindingDescriptions=[binding],
             vertexAttributeDescriptionCount=len(attrs), pVertexAttributeDescriptions=attrs)
@@ -435,13 +444,14 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                if mode in ("coverage", "facing", "shaded+facing"):
-                    key = (False, False)
-                elif silhouette:
-                    key = (not d.double_sided, False)
+                if mode in ("coverage", "facing"):
+                    pipe = self._lean[False]
+                elif mode == "silhouette":
+                    pipe = self._lean[not d.double_sided]
+                elif mode == "shaded+facing":
+                    pipe = self._pipelines[(False, False)]
                 else:
-                    key = (not d.double_sided, d.blended)
-                pipe = self._pipelines[key]
+                    pipe = self._pipelines[(not d.double_sided, d.blended)]
                 if pipe is not bound_pipe:
                     vk.vkCmdBindPipeline(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, pipe)
                     bound_pipe = pipe
@@ -515,12 +525,14 @@ class Renderer:
         self._destroy_targets()
         self.white.destroy()
         vk.vkDestroySampler(dev, self.white_sampler, None)
-        for p in self._pipelines.values():
+        for p in [*self._pipelines.values(), *self._lean.values()]:
             vk.vkDestroyPipeline(dev, p, None)
         vk.vkDestroyPipelineLayout(dev, self.pipeline_layout, None)
         vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
         vk.vkDestroyShaderModule(dev, self._vert, None)
         vk.vkDestroyShaderModule(dev, self._frag, None)
+        vk.vkDestroyShaderModule(dev, self._lean_vert, None)
+        vk.vkDestroyShaderModule(dev, self._lean_frag, None)
         self._vert = None
 
 

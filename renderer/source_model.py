@@ -140,7 +140,10 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         raise MissingFileError(path, "source file is missing")
     try:
         diffuse = _spec_gloss_as_diffuse(path)
-        if diffuse is None:
+        if diffuse is None and path.suffix.lower() == ".obj":
+            scene = trimesh.load(str(path), force="scene", process=False,
+                                 resolver=_backslash_resolver(path.parent))
+        elif diffuse is None:
             scene = trimesh.load(str(path), force="scene", process=False)
         else:
             import io  # noqa: PLC0415
@@ -163,6 +166,9 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
     geoms = instances
     notes: list[str] = []
     positions, uvs, colors, indices = [], [], [], []
+    ref_uvs: list[np.ndarray] = []  # per vertex: the UVs the base colour samples (see _reference_uvs)
+    ref_mask: list[np.ndarray] = []  # per vertex: it has such UVs
+    from_gltf = False
     meshes: list[Mesh] = []
     materials: list[Material] = [Material(id="flat")] if flat else []
     mat_cache: dict[str, tuple[int, Any, Any]] = {}
@@ -190,6 +196,13 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
             mat_cache[gname] = (mat_index, uv, col)
         positions.append(v.astype(np.float32))
         uvs.append(uv if uv is not None else np.zeros((n, 2), np.float32))
+        ref = (getattr(g, "vertex_attributes", None) or {}).get(REFERENCE_UV)
+        if ref is not None and len(ref) == n:
+            ref_uvs.append(np.asarray(ref, np.float32).reshape(n, -1)[:, :2])
+            from_gltf = True
+        else:
+            ref_uvs.append(uvs[-1])
+        ref_mask.append(np.full(n, ref is not None or uv is not None))
         colors.append(col if col is not None else np.ones((n, 4), np.float32))
         indices.append(f.astype(np.uint32).reshape(-1))
         center = (v.min(0) + v.max(0)) / 2
@@ -206,7 +219,10 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
                        indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent,
-                       sidecar={"undrawnRoles": sorted(skip)})
+                       sidecar={"undrawnRoles": sorted(skip),
+                                "referenceUvs": np.concatenate(ref_uvs) if from_gltf else None,
+                                "referenceUvMask": np.concatenate(ref_mask) if from_gltf else None, "sparseApplied": diffuse is not None and any(
+                           isinstance(a, dict) and "sparse" in a for a in (_gltf_json(path) or {}).get("accessors", []))})
 
 
 # glTF material texture slots by the sidecar's role names
@@ -232,9 +248,158 @@ def other_uv_roles(path: Path) -> set[str]:
     return out
 
 
+def _backslash_resolver(folder: Path) -> Any:
+    """A trimesh resolver for an OBJ's folder that also reads Windows paths (``map_Kd .\\tex.jpg``),
+    as MTL files written on Windows name them and the build reads them; trimesh alone finds no file."""
+    from trimesh.resolvers import FilePathResolver  # noqa: PLC0415
+
+    class Resolver(FilePathResolver):
+        def get(self, name: str) -> bytes:
+            return super().get(name.replace("\\", "/"))
+
+    return Resolver(str(folder) + "/")
+
+
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_DTYPES = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+
+
+def _buffer_bytes(doc: dict[str, Any], path: Path, index: int) -> bytes:
+    """The bytes of buffer ``index`` of the glTF at ``path`` (GLB chunk, file or data URI)."""
+    import base64  # noqa: PLC0415
+    import struct  # noqa: PLC0415
+    from urllib.parse import unquote  # noqa: PLC0415
+
+    uri = (doc.get("buffers") or [])[index].get("uri")
+    if uri is None:  # the GLB's BIN chunk
+        data = path.read_bytes()
+        off = 12
+        while off + 8 <= len(data):
+            clen, ctype = struct.unpack_from("<II", data, off)
+            if ctype == 0x004E4942:
+                return data[off + 8: off + 8 + clen]
+            off += 8 + clen
+        return b""
+    if uri.startswith("data:"):
+        return base64.b64decode(uri.split(",", 1)[1])
+    return (path.parent / unquote(uri)).read_bytes()
+
+
+class _DocData:
+    """Reads accessor data of a glTF document and appends new data to one extra data-URI buffer."""
+
+    def __init__(self, doc: dict[str, Any], path: Path) -> None:
+        self.doc, self.path = doc, path
+        self.views = doc.setdefault("bufferViews", [])
+        self.cache: dict[int, bytes] = {}
+        self.blob = bytearray()
+
+    def read(self, view_index: int | None, offset: int, dtype: str, count: int, comps: int) -> np.ndarray:
+        out = np.zeros((count, comps), dtype)
+        if view_index is None or not count:
+            return out
+        view = self.views[view_index]
+        if view["buffer"] not in self.cache:
+            self.cache[view["buffer"]] = _buffer_bytes(self.doc, self.path, view["buffer"])
+        data = self.cache[view["buffer"]]
+        item = np.dtype(dtype).itemsize * comps
+        stride = int(view.get("byteStride", 0) or item)
+        raw = np.frombuffer(data, np.uint8, count=(count - 1) * stride + item,
+                            offset=int(view.get("byteOffset", 0)) + int(offset))
+        rows = np.lib.stride_tricks.as_strided(raw, (count, item), (stride, 1))
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, comps).copy()
+
+    def accessor(self, index: int) -> np.ndarray:
+        """Accessor ``index`` as float64 (normalised integers scaled to 0..1 / -1..1)."""
+        acc = self.doc["accessors"][index]
+        dtype = _DTYPES[acc["componentType"]]
+        a = self.read(acc.get("bufferView"), acc.get("byteOffset", 0), dtype, int(acc["count"]),
+                      _COMPONENTS[acc["type"]]).astype(np.float64)
+        if acc.get("normalized") and np.dtype(dtype).kind in "iu":
+            info = np.iinfo(np.dtype(dtype))
+            a = np.maximum(a / info.max, -1.0)
+        return a
+
+    def append(self, values: np.ndarray) -> int:
+        """A new buffer view holding ``values``' bytes; its index."""
+        self.blob += b"\0" * (-len(self.blob) % 4)
+        self.views.append({"buffer": len(self.doc["buffers"]), "byteOffset": len(self.blob),
+                           "byteLength": values.nbytes})
+        self.blob += values.tobytes()
+        return len(self.views) - 1
+
+    def finish(self) -> None:
+        import base64  # noqa: PLC0415
+
+        if self.blob:
+            self.doc["buffers"].append({"byteLength": len(self.blob), "uri": "data:application/octet-stream;base64,"
+                                        + base64.b64encode(bytes(self.blob)).decode()})
+
+
+def _densify_sparse(doc: dict[str, Any], data: _DocData) -> bool:
+    """Rewrite every sparse accessor of ``doc`` as a plain one (its base values, or zeros, with
+    the sparse substitutions applied): trimesh ignores ``sparse`` and would read the base values
+    only. True when something was rewritten."""
+    changed = False
+    for acc in doc.get("accessors") or []:
+        sp = acc.get("sparse") if isinstance(acc, dict) else None
+        if sp is None:
+            continue
+        comps, dtype = _COMPONENTS[acc["type"]], _DTYPES[acc["componentType"]]
+        values = data.read(acc.get("bufferView"), acc.get("byteOffset", 0), dtype, int(acc["count"]), comps)
+        n = int(sp["count"])
+        idx = data.read(sp["indices"]["bufferView"], sp["indices"].get("byteOffset", 0),
+                        _DTYPES[sp["indices"]["componentType"]], n, 1).reshape(-1).astype(np.int64)
+        values[idx] = data.read(sp["values"]["bufferView"], sp["values"].get("byteOffset", 0), dtype, n, comps)
+        acc.pop("sparse")
+        acc["bufferView"], acc["byteOffset"] = data.append(values), 0
+        changed = True
+    return changed
+
+
+REFERENCE_UV = "_REF_UV"  # trimesh keeps attributes named with a leading underscore as vertex attributes
+
+
+def _reference_uvs(doc: dict[str, Any], data: _DocData) -> bool:
+    """Give every primitive whose base colour samples a UV set other than TEXCOORD_0, or through a
+    KHR_texture_transform, a ``_REF_UV`` attribute: that set with the transform applied (glTF's
+    ``T * R * S``), i.e. the UVs the base colour is sampled with, which the build bakes into uv0.
+    trimesh reads TEXCOORD_0 untransformed only. True when something was added."""
+    materials, changed = doc.get("materials") or [], False
+    for mesh in doc.get("meshes") or []:
+        for prim in (mesh or {}).get("primitives") or []:
+            mi = prim.get("material")
+            if not isinstance(mi, int) or not 0 <= mi < len(materials):
+                continue
+            mat = materials[mi] or {}
+            info = ((mat.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
+                    or ((mat.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}).get(
+                        "diffuseTexture"))
+            if not isinstance(info, dict):
+                continue
+            tt = (info.get("extensions") or {}).get("KHR_texture_transform")
+            n = int((tt or {}).get("texCoord", info.get("texCoord", 0)) or 0)
+            acc = (prim.get("attributes") or {}).get(f"TEXCOORD_{n}")
+            if (n == 0 and tt is None) or acc is None:
+                continue
+            uv = data.accessor(acc)[:, :2]
+            if tt is not None:
+                ox, oy = (tt.get("offset") or (0.0, 0.0))[:2]
+                sx, sy = (tt.get("scale") or (1.0, 1.0))[:2]
+                c, s_ = np.cos(float(tt.get("rotation", 0.0))), np.sin(float(tt.get("rotation", 0.0)))
+                u, v = uv[:, 0] * sx, uv[:, 1] * sy
+                uv = np.stack([c * u + s_ * v + ox, -s_ * u + c * v + oy], axis=1)
+            doc["accessors"].append({"bufferView": data.append(np.ascontiguousarray(uv, "<f4")), "byteOffset": 0,
+                                     "componentType": 5126, "count": len(uv), "type": "VEC2"})
+            prim["attributes"][REFERENCE_UV] = len(doc["accessors"]) - 1
+            changed = True
+    return changed
+
+
 def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     """The source with every KHR_materials_pbrSpecularGlossiness material read as its diffuse
-    (baseColor = diffuseFactor x diffuseTexture), or None when it has none.
+    (baseColor = diffuseFactor x diffuseTexture) and every sparse accessor made plain
+    (:func:`_densify_sparse`), or None when it has neither.
 
     The renderer draws albedo (factor x texture x vertex colour, no metallic or specular term),
     and the build stores a spec-gloss material's diffuse as its base colour. trimesh instead
@@ -247,7 +412,13 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     import struct  # noqa: PLC0415
 
     doc = _gltf_json(path)
-    if doc is None or "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
+    if doc is None:
+        return None
+    data = _DocData(doc, path)
+    sparse = _densify_sparse(doc, data)
+    ref_uv = _reference_uvs(doc, data)
+    data.finish()
+    if not (sparse or ref_uv) and "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
         return None
     for mat in doc.get("materials") or []:
         sg = (mat.get("extensions") or {}).pop("KHR_materials_pbrSpecularGlossiness", None)
@@ -258,7 +429,7 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
         pbr["baseColorFactor"] = list(sg.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))
         if sg.get("diffuseTexture") is not None:
             pbr["baseColorTexture"] = sg["diffuseTexture"]
-    doc["extensionsUsed"] = [e for e in doc["extensionsUsed"] if e != "KHR_materials_pbrSpecularGlossiness"]
+    doc["extensionsUsed"] = [e for e in doc.get("extensionsUsed") or [] if e != "KHR_materials_pbrSpecularGlossiness"]
     doc["extensionsRequired"] = [e for e in doc.get("extensionsRequired") or []
                                  if e != "KHR_materials_pbrSpecularGlossiness"]
     js = json.dumps(doc).encode()
@@ -324,7 +495,8 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
     geometry, colour = True, True
     doc = _gltf_json(path)
     if doc is not None:
-        if any(isinstance(a, dict) and "sparse" in a for a in doc.get("accessors", [])):
+        if any(isinstance(a, dict) and "sparse" in a for a in doc.get("accessors", [])) and not \
+                source.sidecar.get("sparseApplied"):
             geometry = False
             notes.append("the source uses sparse accessors, which trimesh ignores: no source comparison")
         used = set(doc.get("extensionsUsed", []))

@@ -172,3 +172,16 @@ def test_roughness_alone_moves_the_highlights_only(built: Path, tmp_path: Path) 
     moved = max(v["colorDiff"] for v in r.check("source").figures["views"])
     assert 0.001 < moved, r.check("source").figures
     assert r.check("roles").status == "fail", r.check("roles").figures
+
+
+@pytest.mark.parametrize("model", ["multiuv", "transform"])
+def test_flipped_v_on_another_uv_set_or_through_a_transform_is_caught(built: Path, model: str,
+                                                                      tmp_path: Path) -> None:
+    """The reference reads the UV set the base colour samples (TEXCOORD_1 here) with its
+    KHR_texture_transform applied, which trimesh alone does not: the uvs check compares them."""
+    shutil.copytree(built / "out", tmp_path / "out")
+    good = validate_model(tmp_path / "out" / f"{model}.json", OPTS, isolate=False).check("uvs")
+    assert good.status == "pass" and good.figures["maxUvError"] == 0.0, (good.messages, good.figures)
+    MUTATIONS["flipped V"][0](tmp_path / "out" / f"{model}.json")
+    uvs = validate_model(tmp_path / "out" / f"{model}.json", OPTS, isolate=False).check("uvs")
+    assert uvs.status == "fail" and "flipped or shifted UVs" in uvs.messages[0], uvs.messages
