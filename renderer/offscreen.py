@@ -76,6 +76,7 @@ class GpuModel:
     texture_slots: list[tuple[int, int]]  # per material: (set, slot); slot 0 of each set is white
     upload_seconds: float = 0.0
     destroyed: bool = field(default=False)
+    plain: bool = False  # no texture in any role and white vertex colours: shaded through the PLAIN shaders
 
 
 class Renderer:
@@ -97,6 +98,8 @@ class Renderer:
         self._frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache))
         self._lean_vert = self._module(compile_glsl(shader_path("lean.vert"), shader_cache))
         self._lean_frag = self._module(compile_glsl(shader_path("lean.frag"), shader_cache))
+        self._plain_vert = self._module(compile_glsl(shader_path("mesh.vert"), shader_cache, ("PLAIN",)))
+        self._plain_frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache, ("PLAIN",)))
         self.timings["compile"] = time.perf_counter() - t0
         self._make_layouts()
         self._pipelines: dict[tuple[bool, bool], Any] = {}
@@ -106,7 +109,11 @@ class Renderer:
         # coverage, silhouette and facing: position only, no varyings (lean.vert/lean.frag). lavapipe
         # sets up every triangle's attribute planes: MetalRoughSpheresNoTextures' facing renders of
         # 1.04M triangles cost about half as much without them (see docs/VALIDATE.md, "Speed")
-        self._lean = {cull: self._make_pipeline(cull, False, lean=True) for cull in (False, True)}
+        self._lean = {cull: self._make_pipeline(cull, False, variant="lean") for cull in (False, True)}
+        # shaded renders of a model without textures and with white vertex colours: mesh.vert/.frag
+        # compiled with PLAIN, the position the only varying (GpuModel.plain)
+        self._plain = {(cull, blend): self._make_pipeline(cull, blend, variant="plain")
+                       for cull in (False, True) for blend in (False, True)}
         self.white = self._upload_texture(Texture("white", [np.full((1, 1, 4), 255, np.uint8)], 37))
         self.white_sampler = self._make_sampler({}, 1)
         self.resize(width, height)
@@ -134,13 +141,13 @@ class Renderer:
             setLayoutCount=1, pSetLayouts=[self.set_layout], pushConstantRangeCount=1,
             pPushConstantRanges=[push]), None)
 
-    def _make_pipeline(self, cull: bool, blend: bool, lean: bool = False) -> Any:
+    def _make_pipeline(self, cull: bool, blend: bool, variant: str = "full") -> Any:
         vk = self.vk
+        vert, frag = {"full": (self._vert, self._frag), "lean": (self._lean_vert, self._lean_frag),
+                      "plain": (self._plain_vert, self._plain_frag)}[variant]
         stages = [
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT,
-                                               module=self._lean_vert if lean else self._vert, pName="main"),
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT,
-                                               module=self._lean_frag if lean else self._frag, pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT, module=vert, pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT, module=frag, pName="main"),
         ]
         binding = vk.VkVertexInputBindingDescription(binding=0, stride=VERTEX_STRIDE,
                                                      inputRate=vk.VK_VERTEX_INPUT_RATE_VERTEX)
@@ -152,7 +159,7 @@ class Renderer:
             vk.VkVertexInputAttributeDescription(location=2, binding=0, format=vk.VK_FORMAT_R32G32B32A32_SFLOAT,
                                                  offset=20),
         ]
-        if lean:
+        if variant != "full":
             attrs = attrs[:1]
         vertex_input = vk.VkPipelineVertexInputStateCreateInfo(
             vertexBindingDescriptionCount=1, pVertexBindingDescriptions=[binding],
@@ -352,7 +359,8 @@ class Renderer:
         vk.vkUpdateDescriptorSets(ctx.device, len(writes), writes, 0, None)
         dt = time.perf_counter() - t0
         self.timings["upload"] += dt
-        return GpuModel(model, vb, ib, mb, images, samplers, pool, sets, slots, upload_seconds=dt)
+        plain = not images and bool(np.all(model.colors == 1.0))
+        return GpuModel(model, vb, ib, mb, images, samplers, pool, sets, slots, upload_seconds=dt, plain=plain)
 
     def release(self, gpu: GpuModel) -> None:
         """Destroy everything :meth:`upload` created for ``gpu``."""
@@ -449,9 +457,9 @@ class Renderer:
                 elif mode == "silhouette":
                     pipe = self._lean[not d.double_sided]
                 elif mode == "shaded+facing":
-                    pipe = self._pipelines[(False, False)]
+                    pipe = (self._plain if gpu.plain else self._pipelines)[(False, False)]
                 else:
-                    pipe = self._pipelines[(not d.double_sided, d.blended)]
+                    pipe = (self._plain if gpu.plain else self._pipelines)[(not d.double_sided, d.blended)]
                 if pipe is not bound_pipe:
                     vk.vkCmdBindPipeline(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, pipe)
                     bound_pipe = pipe
@@ -525,7 +533,7 @@ class Renderer:
         self._destroy_targets()
         self.white.destroy()
         vk.vkDestroySampler(dev, self.white_sampler, None)
-        for p in [*self._pipelines.values(), *self._lean.values()]:
+        for p in [*self._pipelines.values(), *self._lean.values(), *self._plain.values()]:
             vk.vkDestroyPipeline(dev, p, None)
         vk.vkDestroyPipelineLayout(dev, self.pipeline_layout, None)
         vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
@@ -533,6 +541,8 @@ class Renderer:
         vk.vkDestroyShaderModule(dev, self._frag, None)
         vk.vkDestroyShaderModule(dev, self._lean_vert, None)
         vk.vkDestroyShaderModule(dev, self._lean_frag, None)
+        vk.vkDestroyShaderModule(dev, self._plain_vert, None)
+        vk.vkDestroyShaderModule(dev, self._plain_frag, None)
         self._vert = None
 
 

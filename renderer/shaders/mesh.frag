@@ -7,9 +7,16 @@
 // emissive (added). The seed format carries no metallic, roughness, occlusion-strength or emissive
 // factor, so the textures are drawn with factor 1 (the source reference likewise): the picture tests the
 // textures. Without a metallic-roughness texture the lighting is the plain Lambert of before.
+// PLAIN (compiled with -DPLAIN): for models without textures and with white vertex colours, the
+// position is the only varying (lavapipe sets up every varying of every triangle).
 layout(location = 0) in vec3 vPos;
+#ifdef PLAIN
+const vec2 vUV = vec2(0.0);
+const vec4 vColor = vec4(1.0);
+#else
 layout(location = 1) in vec2 vUV;
 layout(location = 2) in vec4 vColor;
+#endif
 layout(location = 0) out vec4 outColor;
 
 struct Material {
