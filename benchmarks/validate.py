@@ -151,7 +151,9 @@ def against(args: argparse.Namespace) -> int:
             self._stderr = tempfile.TemporaryFile()
             env = renderer_env()
             env["PYTHONPATH"] = self.root
-            self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
+            # -P: no working directory on sys.path, so PYTHONPATH decides whose code runs (without it,
+            # a run from inside a checkout validated with that checkout's code on both sides)
+            self.proc = subprocess.Popen([sys.executable, "-P", "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
             self._buf = b""
             self._ready = False
@@ -166,6 +168,7 @@ def against(args: argparse.Namespace) -> int:
             return float("nan")
 
     def timed(pool: WorkerPool, m: Path):  # noqa: ANN202
+        m = Path(m).resolve()
         c0 = cpu(pool)
         r = pool.validate(m)
         return r, cpu(pool) - c0
