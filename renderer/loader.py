@@ -266,9 +266,11 @@ DRAWN_ROLES = {"normal": VK_FORMAT_R8G8B8A8_UNORM, "metallicRoughness": VK_FORMA
 
 
 def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: str,
-                       notes: list[str]) -> Texture | None:
+                       notes: list[str], loaded: dict[tuple, Texture | None] | None = None) -> Texture | None:
     """The material's texture in ``role`` (its KTX2, else level 0 of its image), when it samples
-    the UV set the base colour does (the renderer draws one UV set)."""
+    the UV set the base colour does (the renderer draws one UV set). ``loaded``: the model's
+    textures read so far, by file and sampler (a packed occlusion-roughness-metallic KTX2 that two
+    roles name is read and uploaded once)."""
     textures = side_mat.get("textures") or {}
     tex = textures.get(role)
     if not tex:
@@ -277,9 +279,15 @@ def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: 
     if int((base or {}).get("texCoord", 0)) != int(tex.get("texCoord", 0)):
         notes.append(f"material {mat_id}: the {role} texture uses another UV set than the base colour: not drawn")
         return None
+    key = (tex.get("ktx2") or tex.get("path"), repr(sorted((tex.get("sampler") or {}).items())),
+           DRAWN_ROLES[role])
+    if loaded is not None and key in loaded:
+        return loaded[key]
     out = _load_texture(root, mat_id, tex, "", notes)
     if out is not None and not out.from_ktx2:
         out.vk_format = DRAWN_ROLES[role]
+    if loaded is not None:
+        loaded[key] = out
     return out
 
 
@@ -322,6 +330,7 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
     indices = np.frombuffer(idx_raw, "<u4").astype(np.uint32)
 
     side_mats = {m.get("id"): m for m in side.get("materials", []) if isinstance(m, dict)}
+    loaded: dict[tuple, Texture | None] = {}  # data-role textures read so far (see _load_role_texture)
     materials: list[Material] = []
     mat_index: dict[str, int] = {}
     for m in mats_seed:
@@ -333,7 +342,7 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
         tex = (sm.get("textures") or {}).get("baseColor")
         texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes) if load_textures else None
         normal = _load_normal_texture(root, mid, sm, notes) if load_textures else None
-        roles = {r: _load_role_texture(root, mid, sm, r, notes) if load_textures else None
+        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded) if load_textures else None
                  for r in ("metallicRoughness", "occlusion", "emissive")}
         mat_index[mid] = len(materials)
         materials.append(Material(id=mid, base_color=tuple(float(c) for c in color[:4]),  # type: ignore[arg-type]

@@ -302,6 +302,7 @@ class Renderer:
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
         by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
+        uploaded: dict[int, int] = {}  # id(Texture) -> its index in images
         for i, m in enumerate(model.materials):
             roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
                      m.emissive_texture)
@@ -310,10 +311,14 @@ class Renderer:
                 by_set.append([])
             placed = []
             for t in texs:
-                images.append(self._upload_texture(t, model.notes))
-                samplers.append(self._make_sampler(t.sampler, len(t.levels)))
-                by_set[-1].append(len(images) - 1)
-                placed.append(len(by_set[-1]))
+                k = uploaded.get(id(t))
+                if k is None or k not in by_set[-1]:  # the same Texture in two roles: one image
+                    if k is None:
+                        images.append(self._upload_texture(t, model.notes))
+                        samplers.append(self._make_sampler(t.sampler, len(t.levels)))
+                        k = uploaded[id(t)] = len(images) - 1
+                    by_set[-1].append(k)
+                placed.append(by_set[-1].index(k) + 1)
             slot_of = dict(zip([k for k, t in enumerate(roles) if t is not None], placed))
             s_idx = len(by_set) - 1
             base_slot = slot_of.get(0, 0)

@@ -98,7 +98,8 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
         """The source image of ``role`` with a mip chain of its own (:mod:`renderer.ref_mips`)."""
         if img is None or uv is None or role in skip:
             return None
-        key = (id(img), role)
+        # metallic-roughness and occlusion are both linear data: a packed image gets one chain
+        key = (id(img), "data" if role in ("metallicRoughness", "occlusion") else role)
         sampler = (samplers or {}).get(role)
         if images is not None and key in images:  # type: ignore[operator]
             tex = images[key]  # type: ignore[index]
