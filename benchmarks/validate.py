@@ -151,7 +151,9 @@ def against(args: argparse.Namespace) -> int:
             self._stderr = tempfile.TemporaryFile()
             env = renderer_env()
             env["PYTHONPATH"] = self.root
-            self.proc = subprocess.Popen([sys.executable, "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
+            # -P: no working directory on sys.path, so PYTHONPATH decides whose code runs (without it,
+            # a run from inside a checkout validated with that checkout's code on both sides)
+            self.proc = subprocess.Popen([sys.executable, "-P", "-m", "assetpipe.renderer.worker"], stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, stderr=self._stderr, env=env, cwd=os.getcwd())
             self._buf = b""
             self._ready = False
@@ -166,6 +168,7 @@ def against(args: argparse.Namespace) -> int:
             return float("nan")
 
     def timed(pool: WorkerPool, m: Path):  # noqa: ANN202
+        m = Path(m).resolve()
         c0 = cpu(pool)
         r = pool.validate(m)
         return r, cpu(pool) - c0
@@ -226,12 +229,69 @@ def copy_model(model_json: Path, dest: Path) -> Path:
     return dest / model_json.name
 
 
+def rendered_change(original: Path, mutated: Path, opts: ValidateOptions) -> dict:
+    """What a mutation changes in what the model renders: the unmutated and the mutated build drawn
+    by one renderer (this process), every LOD, every view of the validation at its size, shaded and
+    facing, and every texel of every mip level of every texture the renderer samples. ``identity``
+    is True only when no rendered pixel channel differs by more than 1 code (the 8-bit target's
+    rounding) and the largest texel difference, mip levels included, is below the roles check's
+    tolerance: the mutation then did not change the asset in anything a viewer can see, and the
+    suite does not count it (per case, from these figures)."""
+    import numpy as np  # noqa: PLC0415
+
+    from assetpipe.core.errors import AssetpipeError  # noqa: PLC0415
+    from assetpipe.renderer.camera import fit_camera  # noqa: PLC0415
+    from assetpipe.renderer.loader import load_built_model  # noqa: PLC0415
+    from assetpipe.renderer.session import shared_renderer  # noqa: PLC0415
+
+    try:
+        a, b = load_built_model(original), load_built_model(mutated)
+    except AssetpipeError as exc:
+        return {"identity": False, "summary": f"the mutated build does not load ({str(exc)[:80]})"}
+    if a.lod_count != b.lod_count or len(a.materials) != len(b.materials):
+        return {"identity": False, "summary": "LOD or material counts differ"}
+    texel = 0.0
+    roles = ("texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture", "emissive_texture")
+    for ma, mb in zip(a.materials, b.materials):
+        for attr in roles:
+            ta, tb = getattr(ma, attr), getattr(mb, attr)
+            if (ta is None) != (tb is None) or (ta is not None and len(ta.levels) != len(tb.levels)):
+                return {"identity": False, "summary": f"{attr} differs in presence or levels"}
+            if ta is not None:
+                for la, lb in zip(ta.levels, tb.levels):
+                    if la.shape != lb.shape:
+                        return {"identity": False, "summary": f"{attr} level shapes differ"}
+                    texel = max(texel, float(np.abs(la.astype(np.int16) - lb.astype(np.int16)).mean()) / 255)
+    renderer = shared_renderer(opts.width, opts.height, validation=False)
+    ga, gb = renderer.upload(a), renderer.upload(b)
+    worst_px, worst_block = 0, 0.0
+    try:
+        for view in opts.views:
+            cam = fit_camera(a.center, a.radius, view, opts.width, opts.height)
+            for lod in range(a.lod_count):
+                for mode in ("shaded", "facing"):
+                    ia = renderer.render(ga, cam, mode=mode, lod=lod)
+                    ib = renderer.render(gb, cam, mode=mode, lod=lod)
+                    worst_px = max(worst_px, int(np.abs(ia.astype(np.int16) - ib.astype(np.int16)).max()))
+                    from assetpipe.renderer.compare import block_color_difference  # noqa: PLC0415
+
+                    worst_block = max(worst_block, block_color_difference(ia, ib)[0])
+    finally:
+        renderer.release(ga)
+        renderer.release(gb)
+    identity = worst_px <= 1 and texel < opts.role_tolerance
+    return {"identity": identity, "summary": f"largest rendered pixel difference {worst_px} codes, block colour "
+                                            f"difference {worst_block:.4f}, largest mean texel difference of a "
+                                            f"mip level {texel:.4f} (identity: <= 1 code and < "
+                                            f"{opts.role_tolerance:.4f})"}
+
+
 def mutations(args: argparse.Namespace) -> int:
     """Apply every mutation to every model it applies to; print the catch rate per kind."""
     import shutil  # noqa: PLC0415
 
     from validate_assets import write_assets  # noqa: PLC0415
-    from validate_mutations import MUTATIONS, NotApplicable, caught  # noqa: PLC0415
+    from validate_mutations import MUTATIONS, NotApplicable, caught, caught_by  # noqa: PLC0415
 
     with tempfile.TemporaryDirectory(prefix="assetpipe-mut-") as tmp:
         tmp_p = Path(tmp)
@@ -245,6 +305,7 @@ def mutations(args: argparse.Namespace) -> int:
         false_alarms = [f for r in clean for f in r.failures()]
         good = [Path(r.model) for r in clean if r.passed]
         jobs: list[tuple[str, Path]] = []
+        sources: list[Path] = []
         for kind, (mutate, _, _) in MUTATIONS.items():
             for i, m in enumerate(good):
                 dest = tmp_p / "mut" / f"{len(jobs)}"
@@ -255,21 +316,31 @@ def mutations(args: argparse.Namespace) -> int:
                     shutil.rmtree(dest)
                     continue
                 jobs.append((kind, target))
+                sources.append(m)
         results = validate_batch([t for _, t in jobs], opts, jobs=args.jobs)
-        print(f"{'mutation kind':<38} {'models':>6} {'caught':>6} {'rate':>6}  example message")
-        total = hit = 0
+        print(f"{'mutation kind':<38} {'models':>6} {'caught':>6} {'rate':>6}  caught by (check: models)")
+        total = hit = identities = 0
+        originals = dict(zip((str(t) for _, t in jobs), (src for src in sources)))
         for kind, (_, checks, phrase) in MUTATIONS.items():
-            rs = [r for (k, _), r in zip(jobs, results) if k == kind]
-            got = [caught(r, checks, phrase) for r in rs]
+            rs = [(t, r) for (k, t), r in zip(jobs, results) if k == kind]
+            got = [caught(r, checks, phrase) for _, r in rs]
+            by = {c: sum(c in caught_by(r, checks, phrase) for _, r in rs) for c in checks}
             n_hit = sum(ok for ok, _ in got)
-            total, hit = total + len(rs), hit + n_hit
-            example = next((line for ok, line in got if ok), "")
-            print(f"{kind:<38} {len(rs):>6} {n_hit:>6} {n_hit / max(len(rs), 1):>6.0%}  {example.split(': ', 1)[-1][:90]}")
-            for (ok, line), r in zip(got, rs):
-                if not ok:
-                    print(f"    MISSED on {r.id}: {line or 'passed'}")
-        print(f"all kinds: {hit} of {total} caught; false alarms on the {len(clean)} unmutated models: "
-              f"{len(false_alarms)}")
+            misses = []
+            for (ok, line), (t, r) in zip(got, rs):
+                if ok:
+                    continue
+                same = rendered_change(Path(originals[str(t)]), t, opts)
+                misses.append((r.id, line, same))
+            n_ident = sum(1 for _, _, same in misses if same["identity"])
+            total, hit, identities = total + len(rs) - n_ident, hit + n_hit, identities + n_ident
+            print(f"{kind:<38} {len(rs) - n_ident:>6} {n_hit:>6} {n_hit / max(len(rs) - n_ident, 1):>6.0%}  "
+                  + ", ".join(f"{c}: {n}" for c, n in by.items()))
+            for mid, line, same in misses:
+                print(f"    {'IDENTITY' if same['identity'] else 'MISSED'} on {mid}: {line or 'passed'}; "
+                      f"against the unmutated build: {same['summary']}")
+        print(f"all kinds: {hit} of {total} caught; {identities} identity mutations not counted (each shown by "
+              f"its figures above); false alarms on the {len(clean)} unmutated models: {len(false_alarms)}")
         for f in false_alarms:
             print(f"    false alarm: {f[:200]}")
     return 0

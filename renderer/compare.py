@@ -82,6 +82,26 @@ def block_color_difference(img_a: np.ndarray, img_b: np.ndarray, block: int = 8,
     return float(diff.mean()), int(keep.sum())
 
 
+def block_color_differences(img_a: np.ndarray, img_b: np.ndarray, block: int = 8,
+                            min_coverage: float = 0.75) -> np.ndarray:
+    """Per compared block (as :func:`block_color_difference`), the largest absolute RGB
+    difference (0..1) of its mean colours: (K,) float64, empty when no block is compared."""
+    h, w = img_a.shape[:2]
+    hb, wb = h // block, w // block
+    if hb == 0 or wb == 0:
+        return np.zeros(0)
+    both = (coverage(img_a) & coverage(img_b))[: hb * block, : wb * block]
+    cov = both.reshape(hb, block, wb, block).mean(axis=(1, 3))
+    keep = cov >= min_coverage
+
+    def means(img: np.ndarray) -> np.ndarray:
+        rgb = img[: hb * block, : wb * block, :3].astype(np.float64) / 255.0 * both[..., None]
+        return rgb.reshape(hb, block, wb, block, 3).sum(axis=(1, 3)) / np.maximum(
+            cov[..., None] * block * block, 1e-9)
+
+    return np.abs(means(img_a) - means(img_b)).max(axis=-1)[keep]
+
+
 def image_difference(a: np.ndarray, b: np.ndarray, tolerance: int = 2) -> tuple[int, float]:
     """(max absolute channel difference, fraction of pixels differing by more than ``tolerance``)."""
     if a.shape != b.shape:

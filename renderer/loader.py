@@ -8,7 +8,8 @@ checked while loading, so a broken build is reported by name instead of drawing 
 * every ``materialId`` against ``ID-mat.json`` and the sidecar,
 * the vertex layout's attributes (position required; uv0 and a colour optional).
 
-Textures: the base colour's KTX2 is uploaded with all its levels exactly as stored (no
+Textures (base colour, and normal, metallic-roughness, occlusion and emissive when they use the base
+colour's UV set): each KTX2 is uploaded with all its levels exactly as stored (no
 mip generation here), block-compressed formats (BC7, ETC2, ...) as blocks; a device that cannot
 sample a block format gets the levels decoded on the CPU, and a note says so. A material without a KTX2 falls back to its ``texturePath`` PNG/JPEG
 decoded with Pillow as level 0 only, and a note says so.
@@ -85,6 +86,10 @@ class Material:
     double_sided: bool = False
     texture: Texture | None = None
     normal_texture: Texture | None = None  # tangent-space normal map (UNORM), on the same UV set as ``texture``
+    # the other roles the shaded picture draws, each on the same UV set as ``texture``:
+    metallic_roughness_texture: Texture | None = None  # UNORM: G roughness, B metallic (glTF)
+    occlusion_texture: Texture | None = None           # UNORM: R occlusion
+    emissive_texture: Texture | None = None            # sRGB emissive colour
 
     @property
     def blended(self) -> bool:
@@ -255,21 +260,40 @@ def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_p
                    from_ktx2=False)
 
 
-def _load_normal_texture(root: Path, mat_id: str, side_mat: dict[str, Any], notes: list[str]) -> Texture | None:
-    """The material's normal map (its KTX2, else level 0 of its image, as UNORM data), when it
-    samples the UV set the base colour does (the renderer draws one UV set)."""
+# the roles drawn besides the base colour: sidecar role name -> the format of a level-0 fallback image
+DRAWN_ROLES = {"normal": VK_FORMAT_R8G8B8A8_UNORM, "metallicRoughness": VK_FORMAT_R8G8B8A8_UNORM,
+               "occlusion": VK_FORMAT_R8G8B8A8_UNORM, "emissive": VK_FORMAT_R8G8B8A8_SRGB}
+
+
+def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: str,
+                       notes: list[str], loaded: dict[tuple, Texture | None] | None = None) -> Texture | None:
+    """The material's texture in ``role`` (its KTX2, else level 0 of its image), when it samples
+    the UV set the base colour does (the renderer draws one UV set). ``loaded``: the model's
+    textures read so far, by file and sampler (a packed occlusion-roughness-metallic KTX2 that two
+    roles name is read and uploaded once)."""
     textures = side_mat.get("textures") or {}
-    tex = textures.get("normal")
+    tex = textures.get(role)
     if not tex:
         return None
     base = textures.get("baseColor")
-    if base and int(base.get("texCoord", 0)) != int(tex.get("texCoord", 0)):
-        notes.append(f"material {mat_id}: the normal map uses another UV set than the base colour: not drawn")
+    if int((base or {}).get("texCoord", 0)) != int(tex.get("texCoord", 0)):
+        notes.append(f"material {mat_id}: the {role} texture uses another UV set than the base colour: not drawn")
         return None
+    key = (tex.get("ktx2") or tex.get("path"), repr(sorted((tex.get("sampler") or {}).items())),
+           DRAWN_ROLES[role])
+    if loaded is not None and key in loaded:
+        return loaded[key]
     out = _load_texture(root, mat_id, tex, "", notes)
     if out is not None and not out.from_ktx2:
-        out.vk_format = VK_FORMAT_R8G8B8A8_UNORM
+        out.vk_format = DRAWN_ROLES[role]
+    if loaded is not None:
+        loaded[key] = out
     return out
+
+
+def _load_normal_texture(root: Path, mat_id: str, side_mat: dict[str, Any], notes: list[str]) -> Texture | None:
+    """The material's normal map (see :func:`_load_role_texture`)."""
+    return _load_role_texture(root, mat_id, side_mat, "normal", notes)
 
 
 def load_built_model(model_json: Path, load_textures: bool = True) -> RenderModel:
@@ -306,6 +330,7 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
     indices = np.frombuffer(idx_raw, "<u4").astype(np.uint32)
 
     side_mats = {m.get("id"): m for m in side.get("materials", []) if isinstance(m, dict)}
+    loaded: dict[tuple, Texture | None] = {}  # data-role textures read so far (see _load_role_texture)
     materials: list[Material] = []
     mat_index: dict[str, int] = {}
     for m in mats_seed:
@@ -317,12 +342,16 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
         tex = (sm.get("textures") or {}).get("baseColor")
         texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes) if load_textures else None
         normal = _load_normal_texture(root, mid, sm, notes) if load_textures else None
+        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded) if load_textures else None
+                 for r in ("metallicRoughness", "occlusion", "emissive")}
         mat_index[mid] = len(materials)
         materials.append(Material(id=mid, base_color=tuple(float(c) for c in color[:4]),  # type: ignore[arg-type]
                                   alpha_mode=str(sm.get("alphaMode", "OPAQUE")),
                                   alpha_cutoff=float(sm.get("alphaCutoff", 0.5)),
                                   double_sided=bool(sm.get("doubleSided", False)), texture=texture,
-                                  normal_texture=normal))
+                                  normal_texture=normal,
+                                  metallic_roughness_texture=roles["metallicRoughness"],
+                                  occlusion_texture=roles["occlusion"], emissive_texture=roles["emissive"]))
 
     side_meshes = {m.get("id"): m for m in side.get("meshes", []) if isinstance(m, dict)}
     meshes: list[Mesh] = []

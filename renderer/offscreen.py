@@ -32,6 +32,7 @@ from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
 
 TEXTURE_SLOTS = 16
+MATERIAL_FLOATS = 12  # the shader's Material: baseColor, params, roles (three vec4, std430)
 VERTEX_STRIDE = 36  # position (3) + uv (2) + colour (4) float32
 PUSH_SIZE = 112     # mat4 + vec4 + vec4 + ivec4
 COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
@@ -75,6 +76,7 @@ class GpuModel:
     texture_slots: list[tuple[int, int]]  # per material: (set, slot); slot 0 of each set is white
     upload_seconds: float = 0.0
     destroyed: bool = field(default=False)
+    plain: bool = False  # no texture in any role and white vertex colours: shaded through the PLAIN shaders
 
 
 class Renderer:
@@ -94,12 +96,24 @@ class Renderer:
         t0 = time.perf_counter()
         self._vert = self._module(compile_glsl(shader_path("mesh.vert"), shader_cache))
         self._frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache))
+        self._lean_vert = self._module(compile_glsl(shader_path("lean.vert"), shader_cache))
+        self._lean_frag = self._module(compile_glsl(shader_path("lean.frag"), shader_cache))
+        self._plain_vert = self._module(compile_glsl(shader_path("mesh.vert"), shader_cache, ("PLAIN",)))
+        self._plain_frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache, ("PLAIN",)))
         self.timings["compile"] = time.perf_counter() - t0
         self._make_layouts()
         self._pipelines: dict[tuple[bool, bool], Any] = {}
         for cull in (False, True):
             for blend in (False, True):
                 self._pipelines[(cull, blend)] = self._make_pipeline(cull, blend)
+        # coverage, silhouette and facing: position only, no varyings (lean.vert/lean.frag). lavapipe
+        # sets up every triangle's attribute planes: MetalRoughSpheresNoTextures' facing renders of
+        # 1.04M triangles cost about half as much without them (see docs/VALIDATE.md, "Speed")
+        self._lean = {cull: self._make_pipeline(cull, False, variant="lean") for cull in (False, True)}
+        # shaded renders of a model without textures and with white vertex colours: mesh.vert/.frag
+        # compiled with PLAIN, the position the only varying (GpuModel.plain)
+        self._plain = {(cull, blend): self._make_pipeline(cull, blend, variant="plain")
+                       for cull in (False, True) for blend in (False, True)}
         self.white = self._upload_texture(Texture("white", [np.full((1, 1, 4), 255, np.uint8)], 37))
         self.white_sampler = self._make_sampler({}, 1)
         self.resize(width, height)
@@ -127,12 +141,13 @@ class Renderer:
             setLayoutCount=1, pSetLayouts=[self.set_layout], pushConstantRangeCount=1,
             pPushConstantRanges=[push]), None)
 
-    def _make_pipeline(self, cull: bool, blend: bool) -> Any:
+    def _make_pipeline(self, cull: bool, blend: bool, variant: str = "full") -> Any:
         vk = self.vk
+        vert, frag = {"full": (self._vert, self._frag), "lean": (self._lean_vert, self._lean_frag),
+                      "plain": (self._plain_vert, self._plain_frag)}[variant]
         stages = [
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT, module=self._vert, pName="main"),
-            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT, module=self._frag,
-                                               pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_VERTEX_BIT, module=vert, pName="main"),
+            vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_FRAGMENT_BIT, module=frag, pName="main"),
         ]
         binding = vk.VkVertexInputBindingDescription(binding=0, stride=VERTEX_STRIDE,
                                                      inputRate=vk.VK_VERTEX_INPUT_RATE_VERTEX)
@@ -144,6 +159,8 @@ class Renderer:
             vk.VkVertexInputAttributeDescription(location=2, binding=0, format=vk.VK_FORMAT_R32G32B32A32_SFLOAT,
                                                  offset=20),
         ]
+        if variant != "full":
+            attrs = attrs[:1]
         vertex_input = vk.VkPipelineVertexInputStateCreateInfo(
             vertexBindingDescriptionCount=1, pVertexBindingDescriptions=[binding],
             vertexAttributeDescriptionCount=len(attrs), pVertexAttributeDescriptions=attrs)
@@ -272,7 +289,7 @@ class Renderer:
         vb.write(verts)
         ib = ctx.create_buffer(model.indices.nbytes, vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
         ib.write(model.indices.astype(np.uint32))
-        mat_rows = np.zeros((max(len(model.materials), 1), 8), np.float32)
+        mat_rows = np.zeros((max(len(model.materials), 1), MATERIAL_FLOATS), np.float32)
         mat_rows[:, :4] = 1.0
         for i, m in enumerate(model.materials):
             mat_rows[i, :4] = m.base_color
@@ -285,24 +302,34 @@ class Renderer:
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
         by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
+        uploaded: dict[int, int] = {}  # id(Texture) -> its index in images
         for i, m in enumerate(model.materials):
-            texs = [t for t in (m.texture, m.normal_texture) if t is not None]
+            roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
+                     m.emissive_texture)
+            texs = [t for t in roles if t is not None]
             if len(by_set[-1]) + len(texs) > per_set:  # a material's textures share one set
                 by_set.append([])
             placed = []
             for t in texs:
-                images.append(self._upload_texture(t, model.notes))
-                samplers.append(self._make_sampler(t.sampler, len(t.levels)))
-                by_set[-1].append(len(images) - 1)
-                placed.append(len(by_set[-1]))
+                k = uploaded.get(id(t))
+                if k is None or k not in by_set[-1]:  # the same Texture in two roles: one image
+                    if k is None:
+                        images.append(self._upload_texture(t, model.notes))
+                        samplers.append(self._make_sampler(t.sampler, len(t.levels)))
+                        k = uploaded[id(t)] = len(images) - 1
+                    by_set[-1].append(k)
+                placed.append(by_set[-1].index(k) + 1)
+            slot_of = dict(zip([k for k, t in enumerate(roles) if t is not None], placed))
             s_idx = len(by_set) - 1
-            base_slot = placed[0] if m.texture is not None else 0
-            slots.append((s_idx if m.texture is not None or m.normal_texture is not None else 0, base_slot))
+            base_slot = slot_of.get(0, 0)
+            slots.append((s_idx if texs else 0, base_slot))
             if m.normal_texture is not None:  # the shader reads the normal map's slot and channel count
-                mat_rows[i, 6] = placed[-1]
+                mat_rows[i, 6] = slot_of[1]
                 fmt = m.normal_texture.vk_format
                 two = fmt in (VK_FORMAT_BC5_UNORM_BLOCK, VK_FORMAT_EAC_R11G11_UNORM_BLOCK)
                 mat_rows[i, 7] = 2.0 if two else 1.0
+            for k in (2, 3, 4):  # metallic-roughness, occlusion, emissive slots (0: not drawn)
+                mat_rows[i, 6 + k] = slot_of.get(k, 0)
         mb.write(mat_rows)
         n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
@@ -337,7 +364,8 @@ class Renderer:
         vk.vkUpdateDescriptorSets(ctx.device, len(writes), writes, 0, None)
         dt = time.perf_counter() - t0
         self.timings["upload"] += dt
-        return GpuModel(model, vb, ib, mb, images, samplers, pool, sets, slots, upload_seconds=dt)
+        plain = not images and bool(np.all(model.colors == 1.0))
+        return GpuModel(model, vb, ib, mb, images, samplers, pool, sets, slots, upload_seconds=dt, plain=plain)
 
     def release(self, gpu: GpuModel) -> None:
         """Destroy everything :meth:`upload` created for ``gpu``."""
@@ -429,13 +457,14 @@ class Renderer:
             bound_pipe = bound_set = None
             ints = np.zeros(4, np.int32)
             for d in opaque + blended:
-                if mode in ("coverage", "facing", "shaded+facing"):
-                    key = (False, False)
-                elif silhouette:
-                    key = (not d.double_sided, False)
+                if mode in ("coverage", "facing"):
+                    pipe = self._lean[False]
+                elif mode == "silhouette":
+                    pipe = self._lean[not d.double_sided]
+                elif mode == "shaded+facing":
+                    pipe = (self._plain if gpu.plain else self._pipelines)[(False, False)]
                 else:
-                    key = (not d.double_sided, d.blended)
-                pipe = self._pipelines[key]
+                    pipe = (self._plain if gpu.plain else self._pipelines)[(not d.double_sided, d.blended)]
                 if pipe is not bound_pipe:
                     vk.vkCmdBindPipeline(cmd, vk.VK_PIPELINE_BIND_POINT_GRAPHICS, pipe)
                     bound_pipe = pipe
@@ -509,12 +538,16 @@ class Renderer:
         self._destroy_targets()
         self.white.destroy()
         vk.vkDestroySampler(dev, self.white_sampler, None)
-        for p in self._pipelines.values():
+        for p in [*self._pipelines.values(), *self._lean.values(), *self._plain.values()]:
             vk.vkDestroyPipeline(dev, p, None)
         vk.vkDestroyPipelineLayout(dev, self.pipeline_layout, None)
         vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
         vk.vkDestroyShaderModule(dev, self._vert, None)
         vk.vkDestroyShaderModule(dev, self._frag, None)
+        vk.vkDestroyShaderModule(dev, self._lean_vert, None)
+        vk.vkDestroyShaderModule(dev, self._lean_frag, None)
+        vk.vkDestroyShaderModule(dev, self._plain_vert, None)
+        vk.vkDestroyShaderModule(dev, self._plain_frag, None)
         self._vert = None
 
 

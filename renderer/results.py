@@ -34,7 +34,9 @@ class ValidateOptions:
     source_root: str | None = None  # where to look for the sources (searched recursively)
     source_max_xor: float = 0.03
     source_max_unexplained: float = 0.002
-    source_color_tolerance: float = 0.08
+    # mean 8x8-block colour difference, build against source (renderer/checks/source.py says why);
+    # plus texture_compressed_png_tolerance - texture_png_tolerance when a drawn texture is block-compressed
+    source_color_tolerance: float = 2.0 / 255.0
     lod_reference_px: int = 1080
     lod_reference_fov_deg: float = 60.0
     lod_max_render_px: int = 512

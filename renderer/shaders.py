@@ -26,11 +26,12 @@ def default_cache_dir() -> Path:
     return cache_root() / "shaders"
 
 
-def compile_glsl(source_path: Path, cache_dir: Path | None = None) -> bytes:
-    """The SPIR-V words of ``source_path`` (stage from its extension), compiled once per content."""
+def compile_glsl(source_path: Path, cache_dir: Path | None = None, defines: tuple[str, ...] = ()) -> bytes:
+    """The SPIR-V words of ``source_path`` (stage from its extension), compiled once per content
+    and set of ``defines`` (preprocessor macros, ``-D``)."""
     source = Path(source_path).read_bytes()
     stage = Path(source_path).suffix.lstrip(".")
-    digest = hashlib.sha256(stage.encode() + b"\0" + source).hexdigest()
+    digest = hashlib.sha256(stage.encode() + b"\0" + source + b"\0" + " ".join(defines).encode()).hexdigest()
     cache = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     cached = cache / f"{Path(source_path).stem}-{stage}-{digest[:32]}.spv"
     if cached.is_file():
@@ -42,7 +43,7 @@ def compile_glsl(source_path: Path, cache_dir: Path | None = None) -> bytes:
     fd, tmp = tempfile.mkstemp(suffix=".spv", dir=cache)
     os.close(fd)
     try:
-        proc = subprocess.run([tool, "-V", "-S", stage, "-o", tmp, str(source_path)],
+        proc = subprocess.run([tool, "-V", "-S", stage, *(f"-D{d}" for d in defines), "-o", tmp, str(source_path)],
                               capture_output=True, text=True, timeout=60)
         if proc.returncode != 0:
             raise RenderError(f"glslangValidator failed on {source_path}:\n{proc.stdout}{proc.stderr}")

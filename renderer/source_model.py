@@ -10,6 +10,7 @@ describe is drawn white.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +37,14 @@ def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
 
 
 def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
-                 decoded: dict[str, Any] | None = None,
+                 decoded: dict[str, Any] | None = None, skip_roles: set[str] | None = None,
+                 sampler_of: dict[str, dict[str, dict[str, Any]]] | None = None,
                  ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
-    """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry."""
+    """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry.
+    Every texture role trimesh reads is drawn (on TEXCOORD_0, the only UV set trimesh reads) but
+    those in ``skip_roles`` (a source material samples them from another UV set), each with a mip
+    chain of its own and, when ``sampler_of`` names the material (glTF, unique material names), the
+    glTF sampler of that role (wrap modes and filters); else trilinear, repeating."""
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
     n = len(geom.vertices)
@@ -71,38 +77,55 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
             if fa.dtype.kind in "ui" or fa.max(initial=0) > 1.0:
                 fa = fa / 255.0
             factor = tuple(float(x) for x in np.r_[fa, [1.0] * 4][:4])  # type: ignore[assignment]
+        kw = getattr(mat, "kwargs", None) or {}
+        if getattr(mat, "baseColorFactor", None) is None and ("d" in kw or "tr" in kw):
+            # an MTL's dissolve (d, or Tr = 1 - d), which trimesh keeps but does not apply
+            try:
+                raw = kw["d"] if "d" in kw else kw["tr"]
+                d = float((raw if isinstance(raw, (list, tuple)) else [raw])[0])
+                d = d if "d" in kw else 1.0 - d
+                factor = (*factor[:3], min(max(d, 0.0), 1.0))  # type: ignore[assignment]
+            except (TypeError, ValueError, IndexError):
+                pass
         image = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
         alpha_mode = str(getattr(mat, "alphaMode", None) or ("BLEND" if factor[3] < 1.0 else "OPAQUE"))
         cutoff = float(getattr(mat, "alphaCutoff", None) or 0.5)
         double_sided = bool(getattr(mat, "doubleSided", False))
-    texture = None
-    if image is not None and uv is not None and images is not None and id(image) in images:
-        texture = images[id(image)]
-    elif image is not None and uv is not None:
+    skip = skip_roles or set()
+    samplers = (sampler_of or {}).get(str(getattr(mat, "name", None))) if mat is not None else None
+
+    def role_texture(img: Any, role: str) -> Texture | None:
+        """The source image of ``role`` with a mip chain of its own (:mod:`renderer.ref_mips`)."""
+        if img is None or uv is None or role in skip:
+            return None
+        # metallic-roughness and occlusion are both linear data: a packed image gets one chain
+        key = (id(img), "data" if role in ("metallicRoughness", "occlusion") else role)
+        sampler = (samplers or {}).get(role)
+        if images is not None and key in images:  # type: ignore[operator]
+            tex = images[key]  # type: ignore[index]
+            return dataclasses.replace(tex, sampler=sampler) if sampler else tex
         try:
-            rgba = _rgba_of(image, decoded)
-            texture = Texture(name=f"{name} source image", levels=[rgba], vk_format=VK_FORMAT_R8G8B8A8_SRGB,
-                              sampler={"minFilter": 9729}, from_ktx2=False)
-            if images is not None:
-                images[id(image)] = texture
+            from .ref_mips import mip_chain  # noqa: PLC0415
+
+            fmt = VK_FORMAT_R8G8B8A8_SRGB if role in ("baseColor", "emissive") else VK_FORMAT_R8G8B8A8_UNORM
+            tex = Texture(name=f"{name} source {role}", levels=mip_chain(_rgba_of(img, decoded), role),
+                          vk_format=fmt, sampler={"minFilter": 9987}, from_ktx2=False)
         except Exception as exc:  # noqa: BLE001
-            notes.append(f"{name}: source image not usable ({exc})")
-    normal = None
-    nimage = getattr(mat, "normalTexture", None) if mat is not None else None
-    if nimage is not None and uv is not None:  # level 0 only, as UNORM data (the shaded check draws it)
-        key = (id(nimage), "normal")
-        try:
-            if images is not None and key in images:  # type: ignore[operator]
-                normal = images[key]  # type: ignore[index]
-            else:
-                normal = Texture(name=f"{name} source normal map", levels=[_rgba_of(nimage, decoded)],
-                                 vk_format=VK_FORMAT_R8G8B8A8_UNORM, sampler={"minFilter": 9729}, from_ktx2=False)
-                if images is not None:
-                    images[key] = normal  # type: ignore[index]
-        except Exception as exc:  # noqa: BLE001
-            notes.append(f"{name}: source normal map not usable ({exc})")
+            notes.append(f"{name}: source {role} image not usable ({exc})")
+            return None
+        if images is not None:
+            images[key] = tex  # type: ignore[index]
+        return dataclasses.replace(tex, sampler=sampler) if sampler else tex
+
+    def attr(a: str) -> Any:
+        return getattr(mat, a, None) if mat is not None else None
+
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
-                     double_sided=double_sided, texture=texture, normal_texture=normal), uv, colors)
+                     double_sided=double_sided, texture=role_texture(image, "baseColor"),
+                     normal_texture=role_texture(attr("normalTexture"), "normal"),
+                     metallic_roughness_texture=role_texture(attr("metallicRoughnessTexture"), "metallicRoughness"),
+                     occlusion_texture=role_texture(attr("occlusionTexture"), "occlusion"),
+                     emissive_texture=role_texture(attr("emissiveTexture"), "emissive")), uv, colors)
 
 
 def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
@@ -118,7 +141,10 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         raise MissingFileError(path, "source file is missing")
     try:
         diffuse = _spec_gloss_as_diffuse(path)
-        if diffuse is None:
+        if diffuse is None and path.suffix.lower() == ".obj":
+            scene = trimesh.load(str(path), force="scene", process=False,
+                                 resolver=_backslash_resolver(path.parent))
+        elif diffuse is None:
             scene = trimesh.load(str(path), force="scene", process=False)
         else:
             import io  # noqa: PLC0415
@@ -141,10 +167,18 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
     geoms = instances
     notes: list[str] = []
     positions, uvs, colors, indices = [], [], [], []
+    ref_uvs: list[np.ndarray] = []  # per vertex: the UVs the base colour samples (see _reference_uvs)
+    ref_mask: list[np.ndarray] = []  # per vertex: it has such UVs
+    from_gltf = False
     meshes: list[Mesh] = []
     materials: list[Material] = [Material(id="flat")] if flat else []
     mat_cache: dict[str, tuple[int, Any, Any]] = {}
     image_cache: dict[int, Texture] = {}
+    skip = other_uv_roles(path)
+    samplers = role_samplers(path)
+    if skip:
+        notes.append(f"the source samples {sorted(skip)} from another UV set than TEXCOORD_0 (trimesh reads "
+                     "TEXCOORD_0 only): not drawn")
     base = first = 0
     for k, (transform, gname, g) in enumerate(instances):
         v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]
@@ -157,12 +191,19 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         elif gname in mat_cache:
             mat_index, uv, col = mat_cache[gname]
         else:
-            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded)
+            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded, skip, samplers)
             mat_index = len(materials)
             materials.append(mat)
             mat_cache[gname] = (mat_index, uv, col)
         positions.append(v.astype(np.float32))
         uvs.append(uv if uv is not None else np.zeros((n, 2), np.float32))
+        ref = (getattr(g, "vertex_attributes", None) or {}).get(REFERENCE_UV)
+        if ref is not None and len(ref) == n:
+            ref_uvs.append(np.asarray(ref, np.float32).reshape(n, -1)[:, :2])
+            from_gltf = True
+        else:
+            ref_uvs.append(uvs[-1])
+        ref_mask.append(np.full(n, ref is not None or uv is not None))
         colors.append(col if col is not None else np.ones((n, 4), np.float32))
         indices.append(f.astype(np.uint32).reshape(-1))
         center = (v.min(0) + v.max(0)) / 2
@@ -178,12 +219,188 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
                        colors=np.concatenate(colors).astype(np.float32),
                        indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
-                       radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent)
+                       radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent,
+                       sidecar={"undrawnRoles": sorted(skip),
+                                "referenceUvs": np.concatenate(ref_uvs) if from_gltf else None,
+                                "referenceUvMask": np.concatenate(ref_mask) if from_gltf else None, "sparseApplied": diffuse is not None and any(
+                           isinstance(a, dict) and "sparse" in a for a in (_gltf_json(path) or {}).get("accessors", []))})
+
+
+# glTF material texture slots by the sidecar's role names
+GLTF_ROLE_PATHS = {"baseColor": (("pbrMetallicRoughness", "baseColorTexture"),
+                                 ("extensions", "KHR_materials_pbrSpecularGlossiness", "diffuseTexture")),
+                   "metallicRoughness": (("pbrMetallicRoughness", "metallicRoughnessTexture"),),
+                   "normal": (("normalTexture",),), "occlusion": (("occlusionTexture",),),
+                   "emissive": (("emissiveTexture",),)}
+
+
+def other_uv_roles(path: Path) -> set[str]:
+    """The roles some material of the glTF at ``path`` samples from a UV set other than TEXCOORD_0."""
+    doc = _gltf_json(path)
+    out: set[str] = set()
+    for mat in (doc or {}).get("materials") or []:
+        for role, paths in GLTF_ROLE_PATHS.items():
+            for keys in paths:
+                node: Any = mat
+                for k in keys:
+                    node = node.get(k) if isinstance(node, dict) else None
+                if isinstance(node, dict) and int(node.get("texCoord", 0) or 0) != 0:
+                    out.add(role)
+    return out
+
+
+def _backslash_resolver(folder: Path) -> Any:
+    """A trimesh resolver for an OBJ's folder that also reads Windows paths (``map_Kd .\\tex.jpg``),
+    as MTL files written on Windows name them and the build reads them; trimesh alone finds no file."""
+    from trimesh.resolvers import FilePathResolver  # noqa: PLC0415
+
+    class Resolver(FilePathResolver):
+        def get(self, name: str) -> bytes:
+            return super().get(name.replace("\\", "/"))
+
+    return Resolver(str(folder) + "/")
+
+
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_DTYPES = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
+
+
+def _buffer_bytes(doc: dict[str, Any], path: Path, index: int) -> bytes:
+    """The bytes of buffer ``index`` of the glTF at ``path`` (GLB chunk, file or data URI)."""
+    import base64  # noqa: PLC0415
+    import struct  # noqa: PLC0415
+    from urllib.parse import unquote  # noqa: PLC0415
+
+    uri = (doc.get("buffers") or [])[index].get("uri")
+    if uri is None:  # the GLB's BIN chunk
+        data = path.read_bytes()
+        off = 12
+        while off + 8 <= len(data):
+            clen, ctype = struct.unpack_from("<II", data, off)
+            if ctype == 0x004E4942:
+                return data[off + 8: off + 8 + clen]
+            off += 8 + clen
+        return b""
+    if uri.startswith("data:"):
+        return base64.b64decode(uri.split(",", 1)[1])
+    return (path.parent / unquote(uri)).read_bytes()
+
+
+class _DocData:
+    """Reads accessor data of a glTF document and appends new data to one extra data-URI buffer."""
+
+    def __init__(self, doc: dict[str, Any], path: Path) -> None:
+        self.doc, self.path = doc, path
+        self.views = doc.setdefault("bufferViews", [])
+        self.cache: dict[int, bytes] = {}
+        self.blob = bytearray()
+
+    def read(self, view_index: int | None, offset: int, dtype: str, count: int, comps: int) -> np.ndarray:
+        out = np.zeros((count, comps), dtype)
+        if view_index is None or not count:
+            return out
+        view = self.views[view_index]
+        if view["buffer"] not in self.cache:
+            self.cache[view["buffer"]] = _buffer_bytes(self.doc, self.path, view["buffer"])
+        data = self.cache[view["buffer"]]
+        item = np.dtype(dtype).itemsize * comps
+        stride = int(view.get("byteStride", 0) or item)
+        raw = np.frombuffer(data, np.uint8, count=(count - 1) * stride + item,
+                            offset=int(view.get("byteOffset", 0)) + int(offset))
+        rows = np.lib.stride_tricks.as_strided(raw, (count, item), (stride, 1))
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, comps).copy()
+
+    def accessor(self, index: int) -> np.ndarray:
+        """Accessor ``index`` as float64 (normalised integers scaled to 0..1 / -1..1)."""
+        acc = self.doc["accessors"][index]
+        dtype = _DTYPES[acc["componentType"]]
+        a = self.read(acc.get("bufferView"), acc.get("byteOffset", 0), dtype, int(acc["count"]),
+                      _COMPONENTS[acc["type"]]).astype(np.float64)
+        if acc.get("normalized") and np.dtype(dtype).kind in "iu":
+            info = np.iinfo(np.dtype(dtype))
+            a = np.maximum(a / info.max, -1.0)
+        return a
+
+    def append(self, values: np.ndarray) -> int:
+        """A new buffer view holding ``values``' bytes; its index."""
+        self.blob += b"\0" * (-len(self.blob) % 4)
+        self.views.append({"buffer": len(self.doc["buffers"]), "byteOffset": len(self.blob),
+                           "byteLength": values.nbytes})
+        self.blob += values.tobytes()
+        return len(self.views) - 1
+
+    def finish(self) -> None:
+        import base64  # noqa: PLC0415
+
+        if self.blob:
+            self.doc["buffers"].append({"byteLength": len(self.blob), "uri": "data:application/octet-stream;base64,"
+                                        + base64.b64encode(bytes(self.blob)).decode()})
+
+
+def _densify_sparse(doc: dict[str, Any], data: _DocData) -> bool:
+    """Rewrite every sparse accessor of ``doc`` as a plain one (its base values, or zeros, with
+    the sparse substitutions applied): trimesh ignores ``sparse`` and would read the base values
+    only. True when something was rewritten."""
+    changed = False
+    for acc in doc.get("accessors") or []:
+        sp = acc.get("sparse") if isinstance(acc, dict) else None
+        if sp is None:
+            continue
+        comps, dtype = _COMPONENTS[acc["type"]], _DTYPES[acc["componentType"]]
+        values = data.read(acc.get("bufferView"), acc.get("byteOffset", 0), dtype, int(acc["count"]), comps)
+        n = int(sp["count"])
+        idx = data.read(sp["indices"]["bufferView"], sp["indices"].get("byteOffset", 0),
+                        _DTYPES[sp["indices"]["componentType"]], n, 1).reshape(-1).astype(np.int64)
+        values[idx] = data.read(sp["values"]["bufferView"], sp["values"].get("byteOffset", 0), dtype, n, comps)
+        acc.pop("sparse")
+        acc["bufferView"], acc["byteOffset"] = data.append(values), 0
+        changed = True
+    return changed
+
+
+REFERENCE_UV = "_REF_UV"  # trimesh keeps attributes named with a leading underscore as vertex attributes
+
+
+def _reference_uvs(doc: dict[str, Any], data: _DocData) -> bool:
+    """Give every primitive whose base colour samples a UV set other than TEXCOORD_0, or through a
+    KHR_texture_transform, a ``_REF_UV`` attribute: that set with the transform applied (glTF's
+    ``T * R * S``), i.e. the UVs the base colour is sampled with, which the build bakes into uv0.
+    trimesh reads TEXCOORD_0 untransformed only. True when something was added."""
+    materials, changed = doc.get("materials") or [], False
+    for mesh in doc.get("meshes") or []:
+        for prim in (mesh or {}).get("primitives") or []:
+            mi = prim.get("material")
+            if not isinstance(mi, int) or not 0 <= mi < len(materials):
+                continue
+            mat = materials[mi] or {}
+            info = ((mat.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
+                    or ((mat.get("extensions") or {}).get("KHR_materials_pbrSpecularGlossiness") or {}).get(
+                        "diffuseTexture"))
+            if not isinstance(info, dict):
+                continue
+            tt = (info.get("extensions") or {}).get("KHR_texture_transform")
+            n = int((tt or {}).get("texCoord", info.get("texCoord", 0)) or 0)
+            acc = (prim.get("attributes") or {}).get(f"TEXCOORD_{n}")
+            if (n == 0 and tt is None) or acc is None:
+                continue
+            uv = data.accessor(acc)[:, :2]
+            if tt is not None:
+                ox, oy = (tt.get("offset") or (0.0, 0.0))[:2]
+                sx, sy = (tt.get("scale") or (1.0, 1.0))[:2]
+                c, s_ = np.cos(float(tt.get("rotation", 0.0))), np.sin(float(tt.get("rotation", 0.0)))
+                u, v = uv[:, 0] * sx, uv[:, 1] * sy
+                uv = np.stack([c * u + s_ * v + ox, -s_ * u + c * v + oy], axis=1)
+            doc["accessors"].append({"bufferView": data.append(np.ascontiguousarray(uv, "<f4")), "byteOffset": 0,
+                                     "componentType": 5126, "count": len(uv), "type": "VEC2"})
+            prim["attributes"][REFERENCE_UV] = len(doc["accessors"]) - 1
+            changed = True
+    return changed
 
 
 def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     """The source with every KHR_materials_pbrSpecularGlossiness material read as its diffuse
-    (baseColor = diffuseFactor x diffuseTexture), or None when it has none.
+    (baseColor = diffuseFactor x diffuseTexture) and every sparse accessor made plain
+    (:func:`_densify_sparse`), or None when it has neither.
 
     The renderer draws albedo (factor x texture x vertex colour, no metallic or specular term),
     and the build stores a spec-gloss material's diffuse as its base colour. trimesh instead
@@ -196,7 +413,13 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     import struct  # noqa: PLC0415
 
     doc = _gltf_json(path)
-    if doc is None or "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
+    if doc is None:
+        return None
+    data = _DocData(doc, path)
+    sparse = _densify_sparse(doc, data)
+    ref_uv = _reference_uvs(doc, data)
+    data.finish()
+    if not (sparse or ref_uv) and "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
         return None
     for mat in doc.get("materials") or []:
         sg = (mat.get("extensions") or {}).pop("KHR_materials_pbrSpecularGlossiness", None)
@@ -207,7 +430,7 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
         pbr["baseColorFactor"] = list(sg.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))
         if sg.get("diffuseTexture") is not None:
             pbr["baseColorTexture"] = sg["diffuseTexture"]
-    doc["extensionsUsed"] = [e for e in doc["extensionsUsed"] if e != "KHR_materials_pbrSpecularGlossiness"]
+    doc["extensionsUsed"] = [e for e in doc.get("extensionsUsed") or [] if e != "KHR_materials_pbrSpecularGlossiness"]
     doc["extensionsRequired"] = [e for e in doc.get("extensionsRequired") or []
                                  if e != "KHR_materials_pbrSpecularGlossiness"]
     js = json.dumps(doc).encode()
@@ -273,7 +496,8 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
     geometry, colour = True, True
     doc = _gltf_json(path)
     if doc is not None:
-        if any(isinstance(a, dict) and "sparse" in a for a in doc.get("accessors", [])):
+        if any(isinstance(a, dict) and "sparse" in a for a in doc.get("accessors", [])) and not \
+                source.sidecar.get("sparseApplied"):
             geometry = False
             notes.append("the source uses sparse accessors, which trimesh ignores: no source comparison")
         used = set(doc.get("extensionsUsed", []))
@@ -302,3 +526,31 @@ def source_caveats(path: Path, built: RenderModel, source: RenderModel) -> tuple
         colour = False
         notes.append("trimesh loaded none of the source's textures: colours not compared")
     return geometry, colour, notes
+
+
+def role_samplers(path: Path) -> dict[str, dict[str, dict[str, Any]]]:
+    """{material name: {role: glTF sampler}} of the glTF at ``path``, for the materials whose name
+    is unique (trimesh keeps a material's name, not its index, nor its samplers). A role without a
+    sampler gets glTF's default (repeat, the viewer's choice of filter: trilinear here)."""
+    doc = _gltf_json(path) or {}
+    mats = doc.get("materials") or []
+    names = [str(m.get("name")) for m in mats if isinstance(m, dict) and m.get("name") is not None]
+    textures, samplers = doc.get("textures") or [], doc.get("samplers") or []
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    for mat in mats:
+        if not isinstance(mat, dict) or mat.get("name") is None or names.count(str(mat["name"])) != 1:
+            continue
+        roles: dict[str, dict[str, Any]] = {}
+        for role, paths in GLTF_ROLE_PATHS.items():
+            for keys in paths:
+                node: Any = mat
+                for k in keys:
+                    node = node.get(k) if isinstance(node, dict) else None
+                if isinstance(node, dict) and isinstance(node.get("index"), int) and 0 <= node["index"] < len(textures):
+                    si = (textures[node["index"]] or {}).get("sampler")
+                    smp = dict(samplers[si]) if isinstance(si, int) and 0 <= si < len(samplers) else {}
+                    smp.setdefault("minFilter", 9987)
+                    roles[role] = smp
+                    break
+        out[str(mat["name"])] = roles
+    return out

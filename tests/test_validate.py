@@ -254,3 +254,50 @@ def test_cli_json_option_baseline_and_jobs(tmp_path: Path, cube: Path) -> None:
     assert doc["summary"] == {"models": 2, "passed": 2, "failed": 0, "acceptedByBaseline": 1}
     res = runner.invoke(validate, ["--list-checks"])
     assert res.exit_code == 0 and all(f"{n}\n  measures:" in res.output for n in ("load", "roles", "lods"))
+
+
+def test_open_edges_are_compared_per_mesh() -> None:
+    """A hole in a small part of a large model: under 0.05 of the model's diagonal, 0.5 of the part's."""
+    import numpy as np
+
+    from assetpipe.renderer.checks.lods import boundary_lengths, mesh_diagonals
+    from assetpipe.renderer.loader import Lod, Material, Mesh, RenderModel
+
+    def grid(n: int, size: float, x0: float) -> tuple[np.ndarray, np.ndarray]:
+        y, x = np.mgrid[0:n + 1, 0:n + 1]
+        pos = np.c_[x0 + x.ravel() * size / n, y.ravel() * size / n, np.zeros(x.size)].astype(np.float32)
+        q = (y[:-1, :-1] * (n + 1) + x[:-1, :-1]).ravel()
+        tris = np.r_[np.c_[q, q + 1, q + n + 2], np.c_[q, q + n + 2, q + n + 1]].astype(np.uint32)
+        return pos, tris
+
+    big_p, big_t = grid(4, 100.0, 0.0)
+    small_p, small_t = grid(4, 1.0, 200.0)
+    holed = small_t[~np.isin(np.arange(len(small_t)), [5, 21])]  # the two halves of one inner quad
+    idx = np.r_[big_t.ravel(), small_t.ravel(), big_t.ravel(), holed.ravel()].astype(np.uint32)
+    nb, ns = big_t.size, small_t.size
+    meshes = [Mesh("big", 0, 0, len(big_p), [Lod(0, 0, nb), Lod(1, nb + ns, nb)], np.zeros(3)),
+              Mesh("small", 0, len(big_p), len(small_p), [Lod(0, nb, ns), Lod(1, 2 * nb + ns, holed.size)],
+                   np.zeros(3))]
+    pos = np.r_[big_p, small_p]
+    model = RenderModel("m", pos, np.zeros((len(pos), 2), np.float32), np.ones((len(pos), 4), np.float32), idx,
+                        meshes, [Material("m")], pos.min(0), pos.max(0), np.zeros(3), 1.0)
+    grown = boundary_lengths(model, 1) - boundary_lengths(model, 0)
+    diag = float(np.linalg.norm(pos.max(0) - pos.min(0)))
+    assert grown[0] == 0 and abs(grown[1] - 4 * 0.25) < 1e-6  # the hole's four edges, 0.25 each
+    assert grown.sum() / diag < 0.05 < grown[1] / mesh_diagonals(model)[1]
+
+
+@pytest.mark.corpus
+def test_sparse_accessors_are_applied_to_the_source_reference() -> None:
+    """trimesh ignores sparse accessors; the reference applies them (SimpleSparseAccessor moves three
+    vertices up to y = 4; trimesh alone reads a maximum of 1)."""
+    import os
+
+    from assetpipe.renderer.source_model import load_source_model
+
+    corpus = Path(os.environ.get("ASSETPIPE_CORPUS", "/work/shared/corpus")) / "models"
+    src = corpus / "SimpleSparseAccessor" / "glTF" / "SimpleSparseAccessor.gltf"
+    if not src.is_file():
+        pytest.skip("the shared corpus is not here")
+    model = load_source_model(src)
+    assert model.sidecar["sparseApplied"] and float(model.positions[:, 1].max()) == 4.0

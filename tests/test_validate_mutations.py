@@ -93,3 +93,95 @@ def test_a_hole_a_double_sided_closed_mesh_hides_is_caught(built: Path, tmp_path
     lods = r.check("lods")
     assert lods.status == "fail" and "a hole?" in " ".join(lods.messages), lods.messages
     assert lods.measured["openEdgeGrowth"] > lods.tolerance["openEdgeGrowth"]
+
+
+def _turn_channel(model: Path, role: str, channel: int) -> None:
+    """Turn one channel of ``role``'s texture 180 degrees (the KTX2 chain and the level-0 image alike)."""
+    import json
+
+    import cv2
+    import numpy as np
+
+    from assetpipe.core.ktx2 import read_ktx2, write_ktx2
+
+    side = json.loads(model.with_name(model.name[:-5] + ".asset.json").read_text())
+    tex = side["materials"][0]["textures"][role]
+    path = model.parent / tex["ktx2"]
+    img = read_ktx2(path.read_bytes())
+    levels = [np.array(lv) for lv in img.levels]
+    for lv in levels:
+        lv[..., channel] = lv[::-1, ::-1, channel]
+    path.write_bytes(write_ktx2(levels, int(img.vk_format)))
+    png = model.parent / tex["path"]
+    data = cv2.imdecode(np.fromfile(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    bgr = {0: 2, 1: 1, 2: 0}[channel]  # OpenCV's channel order
+    data[..., bgr] = data[::-1, ::-1, bgr]
+    png.write_bytes(cv2.imencode(".png", data)[1].tobytes())
+
+
+@pytest.mark.parametrize("kind,model", [("wrong normal map (consistent)", "orm"),
+                                        ("wrong metallic-roughness (consistent)", "orm"),
+                                        ("wrong emissive (consistent)", "pbr"),
+                                        ("wrong texture (consistent)", "orm"),
+                                        ("occlusion channel only", "orm"),
+                                        ("metallic channel only", "orm")])
+def test_a_wrong_texture_in_each_role_changes_the_shaded_picture(built: Path, kind: str, model: str,
+                                                                  tmp_path: Path) -> None:
+    """Every texture role is drawn in the shaded picture (build and source alike): a wrong texture in
+    any role moves its block means past the colour tolerance, so ``source`` fails as well as ``roles``.
+    The ``orm`` kind packs occlusion (R), roughness (G) and metallic (B) in one texture on the base
+    colour's UV set; turning a single channel shows each of the three is drawn."""
+    shutil.copytree(built / "out", tmp_path / "out")
+    target = tmp_path / "out" / f"{model}.json"
+    channel = {"occlusion channel only": 0, "roughness channel only": 1, "metallic channel only": 2}.get(kind)
+    if channel is None:
+        MUTATIONS[kind][0](target)
+    else:
+        _turn_channel(target, "metallicRoughness", channel)
+    r = validate_model(target, OPTS, isolate=False)
+    src = r.check("source")
+    assert src.status == "fail" and any("shaded colours differ" in m for m in src.messages), (src.figures,
+                                                                                             src.messages)
+    assert src.measured["colorDiff"] > src.tolerance["colorDiff"]
+    assert r.check("roles").status == "fail", r.check("roles").figures
+
+
+def test_every_role_is_drawn_for_build_and_source(built: Path) -> None:
+    """The orm kind's build and source reference both carry all five roles to the renderer."""
+    from assetpipe.renderer.loader import load_built_model
+    from assetpipe.renderer.source_model import load_source_model
+
+    roles = ("texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture", "emissive_texture")
+    b = load_built_model(built / "out" / "orm.json").materials[0]
+    s = load_source_model(built / "src" / "orm.glb").materials[0]
+    assert [getattr(b, a) is not None for a in roles] == [True, True, True, True, False]
+    assert [getattr(s, a) is not None for a in roles] == [True, True, True, True, False]
+    # the reference samples a mip chain of its own, down to 1x1, with the glTF sampler
+    assert [lv.shape[:2] for lv in s.texture.levels][-2:] == [(2, 2), (1, 1)]
+    assert s.texture.sampler.get("minFilter") == 9987
+
+
+def test_roughness_alone_moves_the_highlights_only(built: Path, tmp_path: Path) -> None:
+    """Roughness (G) alone changes the specular highlights only, small on the mostly dielectric orm
+    sphere: the picture moves (a roughness that was not drawn would leave it identical, colorDiff 0),
+    but by less than the colour tolerance; ``roles`` catches it."""
+    shutil.copytree(built / "out", tmp_path / "out")
+    target = tmp_path / "out" / "orm.json"
+    _turn_channel(target, "metallicRoughness", 1)
+    r = validate_model(target, OPTS, isolate=False)
+    moved = max(v["colorDiff"] for v in r.check("source").figures["views"])
+    assert 0.001 < moved, r.check("source").figures
+    assert r.check("roles").status == "fail", r.check("roles").figures
+
+
+@pytest.mark.parametrize("model", ["multiuv", "transform"])
+def test_flipped_v_on_another_uv_set_or_through_a_transform_is_caught(built: Path, model: str,
+                                                                      tmp_path: Path) -> None:
+    """The reference reads the UV set the base colour samples (TEXCOORD_1 here) with its
+    KHR_texture_transform applied, which trimesh alone does not: the uvs check compares them."""
+    shutil.copytree(built / "out", tmp_path / "out")
+    good = validate_model(tmp_path / "out" / f"{model}.json", OPTS, isolate=False).check("uvs")
+    assert good.status == "pass" and good.figures["maxUvError"] == 0.0, (good.messages, good.figures)
+    MUTATIONS["flipped V"][0](tmp_path / "out" / f"{model}.json")
+    uvs = validate_model(tmp_path / "out" / f"{model}.json", OPTS, isolate=False).check("uvs")
+    assert uvs.status == "fail" and "flipped or shifted UVs" in uvs.messages[0], uvs.messages

@@ -14,7 +14,9 @@ a second UV set, vertex colours where the kind needs them) with small textures m
 * ``vertexcolor``: COLOR_0, no texture;
 * ``multiuv``: base colour on TEXCOORD_1;
 * ``normalmap``: a renormalised-normal-map fixture: a normal map whose source texels are not
-  unit length (so the build's renormalised level 0 differs from the PNG's bytes).
+  unit length (so the build's renormalised level 0 differs from the PNG's bytes);
+* ``orm``: occlusion, roughness and metallic packed in one texture (R, G, B) that both roles name,
+  on TEXCOORD_0 with the base colour and the normal map, so the shaded picture draws every role.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from PIL import Image
 
 from gltf_builder import GltfBuilder
 
-KINDS = ("pbr", "specgloss", "mask", "blend", "transform", "vertexcolor", "multiuv", "normalmap")
+KINDS = ("pbr", "specgloss", "mask", "blend", "transform", "vertexcolor", "multiuv", "normalmap", "orm")
 
 
 def sphere(seg_u: int = 32, seg_v: int = 16):
@@ -88,6 +90,18 @@ def data_texture(n: int = 64, seed: int = 0) -> np.ndarray:
     return img
 
 
+def orm_texture(n: int = 64) -> np.ndarray:
+    """Occlusion (R: a dark band), roughness (G: a ramp along U) and metallic (B: stripes on one
+    side), none symmetric under a half turn, so a texture turned around changes every channel's picture."""
+    y, x = np.mgrid[0:n, 0:n]
+    img = np.empty((n, n, 4), np.uint8)
+    img[..., 0] = np.where((y >= n // 4) & (y < n // 2), 70, 255)
+    img[..., 1] = 40 + (x * 200) // (n - 1)
+    img[..., 2] = np.where((x < n // 3) & (y % 16 < 8), 255, 0)  # metal stripes on the left third only
+    img[..., 3] = 255
+    return img
+
+
 def emissive_texture(n: int = 256) -> np.ndarray:
     img = np.zeros((n, n, 4), np.uint8)
     img[..., 3] = 255
@@ -132,6 +146,12 @@ def make_asset(kind: str) -> GltfBuilder:
         attrs["COLOR_0"] = col
     elif kind == "multiuv":
         pbr["baseColorTexture"] = {"index": tex(base_texture()), "texCoord": 1}
+    elif kind == "orm":
+        orm = tex(orm_texture())
+        pbr["baseColorTexture"] = {"index": tex(base_texture())}
+        pbr["metallicRoughnessTexture"] = {"index": orm}
+        mat["occlusionTexture"] = {"index": orm}
+        mat["normalTexture"] = {"index": tex(normal_texture())}
     elif kind == "normalmap":
         pbr["baseColorTexture"] = {"index": tex(base_texture())}
         mat["normalTexture"] = {"index": tex(normal_texture(unit=False))}

@@ -270,13 +270,17 @@ MUTATIONS: dict[str, tuple[Callable[[Path], None], tuple[str, ...], str]] = {
     "NaN vertex": (nan_vertex, ("load",), "non-finite"),
     "Inf vertex": (inf_vertex, ("load",), "non-finite"),
     "flipped V": (flipped_v, ("source", "uvs"), "shaded colours differ|flipped or shifted UVs"),
-    "swapped textures": (swapped_textures, ("textures", "roles"), "differs"),
-    "wrong texture (consistent)": (wrong_texture, ("roles",), "differs from the source's normal image"),
-    "wrong normal map (consistent)": (_wrong_in_role("normal"), ("roles",), "differs from the source's normal"),
-    "wrong metallic-roughness (consistent)": (_wrong_in_role("metallicRoughness"), ("roles",),
-                                              "differs from the source's metallicRoughness"),
-    "wrong occlusion (consistent)": (_wrong_in_role("occlusion"), ("roles",), "differs from the source's occlusion"),
-    "wrong emissive (consistent)": (wrong_emissive, ("roles",), "differs from the source's emissive"),
+    "swapped textures": (swapped_textures, ("textures", "roles", "source"), "differs|shaded colours differ"),
+    "wrong texture (consistent)": (wrong_texture, ("roles", "source"),
+                                   "differs from the source's normal image|shaded colours differ"),
+    "wrong normal map (consistent)": (_wrong_in_role("normal"), ("roles", "source"),
+                                      "differs from the source's normal|shaded colours differ"),
+    "wrong metallic-roughness (consistent)": (_wrong_in_role("metallicRoughness"), ("roles", "source"),
+                                              "differs from the source's metallicRoughness|shaded colours differ"),
+    "wrong occlusion (consistent)": (_wrong_in_role("occlusion"), ("roles", "source"),
+                                     "differs from the source's occlusion|shaded colours differ"),
+    "wrong emissive (consistent)": (wrong_emissive, ("roles", "source"),
+                                    "differs from the source's emissive|shaded colours differ"),
     "sRGB and linear swapped": (srgb_linear_swapped, ("textures",), "sRGB and linear swapped"),
     "normal channels swapped (x/y)": (normal_channels_swapped, ("textures",), "swapped texture or channels"),
     "normal channels swapped (x/z)": (normal_xz_swapped, ("textures",), "mean z"),
@@ -289,6 +293,13 @@ MUTATIONS: dict[str, tuple[Callable[[Path], None], tuple[str, ...], str]] = {
     "bounds do not contain the vertices": (bounds_too_small, ("bounds",), "outside the sidecar bounds"),
     "material id points nowhere": (material_id_nowhere, ("load",), "materialId"),
 }
+
+
+def caught_by(result, checks: tuple[str, ...], phrase: str) -> list[str]:
+    """The checks among ``checks`` that failed ``result`` with ``phrase`` in a message."""
+    phrases = phrase.split("|")
+    return [c.name for c in result.checks
+            if c.name in checks and c.status == "fail" and any(p in msg for msg in c.messages for p in phrases)]
 
 
 def caught(result, checks: tuple[str, ...], phrase: str) -> tuple[bool, str]:

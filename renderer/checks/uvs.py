@@ -16,11 +16,13 @@ UV_STORAGE_TOLERANCE = {"float32": 1e-5, "float16": 1e-3, "unorm16": 1.0 / 65535
 
 class UvsCheck(Check):
     name = "uvs"
-    measures = ("for every LOD0 vertex of the build: the distance from its uv0 to the nearest uv0 of a source "
-                "vertex at the same position (trimesh import; positions matched within 1e-4 of the diagonal); "
+    measures = ("for every LOD0 vertex of the build: the distance from its uv0 to the nearest UV of a source "
+                "vertex at the same position, in the UV set the base colour samples with its texture transform "
+                "(trimesh import; positions matched within 1e-4 of the diagonal); "
                 "the largest over all vertices, and the fraction of vertices further than the tolerance")
     tolerance = "the uv0 storage precision: 1e-5 for float32 (1e-3 float16, 1/65535 unorm16)"
-    reason = ("the build copies UVs (a KHR_texture_transform bakes into them, so such sources are skipped): a "
+    reason = ("the build copies UVs (the base colour's UV set, a KHR_texture_transform baked in: the reference "
+              "reads that set and applies the transform itself, renderer/source_model.py): a "
               "welded vertex keeps a UV the source has at that position, so any difference beyond the storage "
               "rounding is a flipped or shifted UV, whatever the texture looks like")
 
@@ -43,8 +45,11 @@ class UvsCheck(Check):
             r.status = "skip"
             r.messages.append(str(why))
             return r.finish()
-        caveat = uv_caveat(src)
+        ref_uvs = source.sidecar.get("referenceUvs")  # the base colour's UV set, transformed (glTF sources)
+        caveat = uv_caveat(src) if ref_uvs is None else None
         has_uv = np.asarray([m.texture is not None for m in source.materials])
+        if ref_uvs is not None:
+            has_uv[:] = True
         if caveat or not has_uv.any():
             r.status = "skip"
             r.messages.append(caveat or "trimesh found no UVs in the source")
@@ -57,6 +62,8 @@ class UvsCheck(Check):
             for mesh in source.meshes:
                 if has_uv[mesh.material]:
                     keep[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count] = True
+            if ref_uvs is not None:
+                keep &= source.sidecar["referenceUvMask"]
             used = np.zeros(len(model.positions), bool)
             for mesh in model.meshes:
                 if mesh.lods and model.materials[mesh.material].texture is not None:
@@ -68,7 +75,8 @@ class UvsCheck(Check):
                 r.messages.append("no textured vertices")
                 return r.finish()
             diag = max(float(np.linalg.norm(model.bounds_max - model.bounds_min)), 1e-12)
-            spos, suv = source.positions[keep].astype(np.float64), source.uvs[keep].astype(np.float64)
+            suv_all = source.uvs if ref_uvs is None else ref_uvs
+            spos, suv = source.positions[keep].astype(np.float64), suv_all[keep].astype(np.float64)
             bpos, buv = model.positions[used].astype(np.float64), model.uvs[used].astype(np.float64)
             # candidates: the source vertices within 1e-4 of the diagonal (a seam holds 2-4 at one position,
             # a pole of a UV sphere one per segment); the error is the UV distance to the nearest candidate's UV

@@ -2,16 +2,28 @@
 // Base colour = factor x texture x vertex colour (glTF). The texture's SRGB format decodes
 // sRGB to linear when sampling; the SRGB colour target encodes on write.
 // Lighting uses the geometric normal from screen-space derivatives (no normals needed), bent by the
-// material's normal map when it has one.
+// material's normal map when it has one. Every texture role is drawn: metallic-roughness (B metallic,
+// G roughness: a metallic base colour and a GGX highlight), occlusion (R, on the ambient term) and
+// emissive (added). The seed format carries no metallic, roughness, occlusion-strength or emissive
+// factor, so the textures are drawn with factor 1 (the source reference likewise): the picture tests the
+// textures. Without a metallic-roughness texture the lighting is the plain Lambert of before.
+// PLAIN (compiled with -DPLAIN): for models without textures and with white vertex colours, the
+// position is the only varying (lavapipe sets up every varying of every triangle).
 layout(location = 0) in vec3 vPos;
+#ifdef PLAIN
+const vec2 vUV = vec2(0.0);
+const vec4 vColor = vec4(1.0);
+#else
 layout(location = 1) in vec2 vUV;
 layout(location = 2) in vec4 vColor;
+#endif
 layout(location = 0) out vec4 outColor;
 
 struct Material {
     vec4 baseColor;   // linear RGBA factor
     vec4 params;      // x alphaCutoff, y alphaMode (0 OPAQUE, 1 MASK, 2 BLEND), z normal-map slot (0: none),
                       // w 1 (x, y, z stored) or 2 (x, y stored: z rebuilt)
+    vec4 roles;       // slots: x metallic-roughness, y occlusion, z emissive (0: none)
 };
 layout(std430, set = 0, binding = 0) readonly buffer Materials { Material materials[]; };
 // Fixed-size array (lavapipe has no descriptor indexing), indexed by a push constant:
@@ -59,8 +71,30 @@ void main() {
     int mode = int(m.params.y + 0.5);
     if (mode == 1 && base.a < m.params.x) discard;
     if (mode != 2) base.a = 1.0;
-    float diffuse = max(dot(n, normalize(pc.lightDir.xyz)), 0.0);
-    outColor = vec4(base.rgb * (0.3 + 0.7 * diffuse), base.a);
+    vec3 L = normalize(pc.lightDir.xyz);
+    float nl = max(dot(n, L), 0.0);
+    int mrslot = int(m.roles.x + 0.5), aoslot = int(m.roles.y + 0.5), emslot = int(m.roles.z + 0.5);
+    float ao = aoslot > 0 ? texture(textures[aoslot], vUV).r : 1.0;
+    vec3 rgb;
+    if (mrslot > 0) {
+        vec4 mr = texture(textures[mrslot], vUV);
+        float metal = mr.b;
+        float a = max(mr.g * mr.g, 0.02);  // GGX alpha = roughness^2, floored: no sub-pixel highlight
+        vec3 f0 = mix(vec3(0.04), base.rgb, metal);
+        vec3 h = normalize(L + toEye);
+        float nh = max(dot(n, h), 0.0), nv = max(dot(n, toEye), 1e-3);
+        float d = a * a / (3.14159265 * pow(nh * nh * (a * a - 1.0) + 1.0, 2.0));
+        vec3 f = f0 + (1.0 - f0) * pow(1.0 - max(dot(h, toEye), 0.0), 5.0);
+        float k = a / 2.0;                  // Smith-Schlick visibility
+        float vis = 1.0 / ((nl * (1.0 - k) + k) * (nv * (1.0 - k) + k) * 4.0);
+        vec3 spec = min(d * vis * f, vec3(8.0));
+        vec3 diffuse = base.rgb * (1.0 - metal);
+        rgb = (diffuse + f0) * 0.3 * ao + (diffuse + spec) * 0.7 * nl;
+    } else {
+        rgb = base.rgb * (0.3 * ao + 0.7 * nl);
+    }
+    if (emslot > 0) rgb += texture(textures[emslot], vUV).rgb;
+    outColor = vec4(rgb, base.a);
     if (pc.sel.z == 3) {            // shaded + facing in one pass (OPAQUE materials, no culling): alpha 1
         outColor.a = (gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5;  // where the nearest surface faces the
     }                               // eye (or is double-sided), 0.5 where a back face is nearest

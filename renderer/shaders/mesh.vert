@@ -12,12 +12,16 @@ layout(push_constant) uniform PushConstants {
 } pc;
 
 layout(location = 0) out vec3 vPos;
+#ifndef PLAIN  // PLAIN: the position is the only varying (mesh.frag says when)
 layout(location = 1) out vec2 vUV;
 layout(location = 2) out vec4 vColor;
+#endif
 
 void main() {
     vPos = inPos;
+#ifndef PLAIN
     vUV = inUV;
     vColor = inColor;
+#endif
     gl_Position = pc.viewProj * vec4(inPos, 1.0);
 }
