@@ -170,7 +170,8 @@ def _candidates(pos32: np.ndarray, src: np.ndarray, src_level: int, src_err: flo
                 opts: LodOptions) -> list[_Candidate]:
     """Simplifications of ``src`` towards ``target`` triangles.
 
-    The regular simplifier first. When it stops above ``sloppy_slack`` x the target
+    The regular simplifier first (with attributes), then, with ``geometry_candidate``, the
+    same on positions alone. When it stops above ``sloppy_slack`` x the target
     (topology allows no more collapses), meshoptimizer's component pruning (keeps seams
     closed) and, with ``sloppy_fallback``, the sloppy simplifier are tried too. The caller
     picks by measured error. Simplifier errors are summed along the chain (an estimate)."""
@@ -180,6 +181,12 @@ def _candidates(pos32: np.ndarray, src: np.ndarray, src_level: int, src_err: flo
     out, err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
                              lock_border=opts.lock_border, target_error=target_error)
     cands = [(out, src_err + err, False, src_level)]
+    if attrs is not None and opts.geometry_candidate:
+        # the same simplification on positions alone (UV seams still stay closed): it wins
+        # only where its measured error is lower (see LodOptions.geometry_candidate)
+        g_out, g_err = simp.simplify(pos32, src, target, lock_border=opts.lock_border,
+                                     target_error=target_error)
+        cands.append((g_out, src_err + g_err, False, src_level))
     if target_error < simp.NO_ERROR_LIMIT or out.shape[0] <= opts.sloppy_slack * target \
             or opts.lock_border:
         return cands
