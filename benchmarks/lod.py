@@ -3,6 +3,8 @@
 Run:  .venv/bin/python benchmarks/lod.py            (everything; long: 1M samples a side)
       .venv/bin/python benchmarks/lod.py --quick    (4 small meshes, no 1M mesh)
       .venv/bin/python benchmarks/lod.py --only Duck,stanford-bunny --no-big
+      .venv/bin/python benchmarks/lod.py --only spider,beast --no-big --no-simplifiers
+          --variants ours --no-recorded --samples 100000   (TABLE 1 for a few cells, quickly)
 
 Simplifier table: for every file (loaded with trimesh and merged into one mesh, node
 transforms applied) and every simplifier (meshopt, meshopt-attr, meshopt+lock_border, sloppy,
