@@ -13,7 +13,7 @@ LOD = 8  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
         # 7: the bound's kernels compiled (numba): same formulas, float64 rounding may differ in the last digits
         # 8: a positions-only candidate beside the attribute-weighted one (LodOptions.geometry_candidate);
-        #    the chosen level simplified again with its worst places locked (LodOptions.lock_fraction)
+        #    optionally (off by default) the chosen level simplified again with its worst places locked
 TEXTURE = 3  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

@@ -91,8 +91,10 @@ class LodOptions:
       again from the same level with the vertices nearest its worst places locked (level 0's
       samples and removed vertices at least ``lock_fraction`` x its largest distance away),
       and that is kept where its estimated Hausdorff distance is lower (needs ``measure``;
-      0 turns it off). meshoptimizer minimises a sum of errors, the Hausdorff distance is a
-      maximum over a few places, which locks keep. Measured in docs/BUILD.md.
+      0, the default, turns it off). meshoptimizer minimises a sum of errors, the Hausdorff
+      distance is a maximum over a few places, which locks keep. Off by default: with 1M
+      samples it moved no cell of benchmarks/lod.py across 1.1x gltfpack's (spider 1/2 1.94x ->
+      1.26x, but beast 1/8 1.20x -> 1.37x) and costs 20-28% of the step (docs/BUILD.md).
     dedupe_triangles: before simplifying, drop triangles whose three corners coincide with an
       earlier triangle's (same winding); where the material is double-sided also those with
       the reverse winding (the back face renders anyway). Level 0 is written without them.
@@ -122,7 +124,7 @@ class LodOptions:
     merge_meshes: bool = True
     dedupe_triangles: bool = True
     geometry_candidate: bool = True
-    lock_fraction: float = 0.7
+    lock_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         from assetpipe.core.errors import ConfigError
