@@ -3,6 +3,8 @@
 Run:  .venv/bin/python benchmarks/lod.py            (everything; long: 1M samples a side)
       .venv/bin/python benchmarks/lod.py --quick    (4 small meshes, no 1M mesh)
       .venv/bin/python benchmarks/lod.py --only Duck,stanford-bunny --no-big
+      .venv/bin/python benchmarks/lod.py --only spider,beast --no-big --no-simplifiers
+          --variants ours --no-recorded --samples 100000   (TABLE 1 for a few cells, quickly)
 
 Simplifier table: for every file (loaded with trimesh and merged into one mesh, node
 transforms applied) and every simplifier (meshopt, meshopt-attr, meshopt+lock_border, sloppy,
@@ -287,10 +289,20 @@ def main() -> int:
                     help="skip the per-simplifier table (meshopt, sloppy, fast-simplification, ...)")
     ap.add_argument("--samples", type=int, default=1_000_000,
                     help="area samples per side of the comparison measurements (1M by default)")
+    ap.add_argument("--variants", help="comma-separated subset of our variants for TABLE 1 "
+                    f"(default: all of {','.join(VARIANTS)})")
+    ap.add_argument("--no-recorded", action="store_true",
+                    help="skip TABLE 2 (the build's recorded bounds against a dense measurement)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
 
     only = set(args.only.split(",")) if args.only else None
+    variants = VARIANTS
+    if args.variants:
+        unknown = set(args.variants.split(",")) - set(VARIANTS)
+        if unknown:
+            ap.error(f"unknown variants {sorted(unknown)} (of {list(VARIANTS)})")
+        variants = {v: VARIANTS[v] for v in args.variants.split(",")}
     if args.quick and only is None:
         only = {"Duck", "fuze", "spider", "stanford-bunny"}
     gltfpack = None if args.no_gltfpack else find_gltfpack()
@@ -367,7 +379,7 @@ def main() -> int:
                 # ours at gltfpack's triangle counts: each output mesh at gltfpack's ratios,
                 # no error budget (a cell compares equal counts)
                 ratios = (1.0, *[max(g / m_build, 1e-9) for _, g, _ in gp])
-                for variant, extra in VARIANTS.items():
+                for variant, extra in variants.items():
                     # the build's measurement (a bound) only matters to "ours" (it picks among
                     # chained and direct candidates by measurement); the other variants make
                     # the same levels without it, and are timed without it
@@ -387,6 +399,8 @@ def main() -> int:
                                             our_hausdorff_pct=100 * oerr.hausdorff_rel,
                                             gltfpack_rms_pct=100 * gerr.rms_rel, our_rms_pct=100 * oerr.rms_rel,
                                             chain_seconds=dt))
+        if args.no_recorded:
+            continue
         # the build's own chains (default options): recorded error against a dense measurement
         t = time.perf_counter()
         built = build_model_lods(build, LodOptions())
@@ -426,7 +440,7 @@ def main() -> int:
 
     print()
     print("median over meshes and ratios (time per input triangle, Hausdorff and RMS % of diagonal):")
-    for kind in (*SIMPLIFIERS, "gltfpack", *VARIANTS):
+    for kind in (*SIMPLIFIERS, "gltfpack", *variants):
         sel = [r for r in rows if r["simplifier"] == kind]
         if sel:
             print(f"  {kind:20} {np.median([1e9 * r['seconds'] / r['input_triangles'] for r in sel]):8.1f} ns/tri"
@@ -436,7 +450,7 @@ def main() -> int:
         print()
         print("TABLE 1: Hausdorff at equal triangle count, ours / gltfpack (-si R -se 1 -sv -noq), "
               f"{args.samples} samples per side")
-        variants = list(VARIANTS)
+        variants = list(variants)
         cells = sorted({(c["mesh"], c["ratio"]) for c in compare})
         by = {(c["mesh"], c["ratio"], c["variant"]): c for c in compare}
         print(f"  {'mesh':28} {'ratio':>6} {'gp tris':>8} {'gp haus%':>9} " +
@@ -469,8 +483,10 @@ def main() -> int:
             print(f"  recorded/dense: min {ratios_.min():.3f}, median {np.median(ratios_):.3f}, "
                   f"max {ratios_.max():.3f}; below the dense value: {int((ratios_ < 1).sum())}/{ratios_.size}")
         _write_csv(args.out / "lod-recorded.csv", recorded)
-    else:
+    if not compare:
         print("gltfpack not run (not on PATH or --no-gltfpack): no comparison")
+    if not chains:
+        return 0
     total_in = sum(c["input_triangles"] for c in chains)
     total_t = sum(c["seconds"] for c in chains)
     total_s = sum(c["seconds_without_measuring"] for c in chains)

@@ -147,7 +147,9 @@ def simplify(
         then weighs each column (default 1). Attribute discontinuities (UV seams: vertices
         with the same position and different attributes) are kept closed either way.
       lock_border: never move vertices on open borders (``meshopt_SimplifyLockBorder``).
-      vertex_lock: (N,) bool/uint8 per-vertex lock (only with ``attributes``).
+      vertex_lock: (N,) bool/uint8 per-vertex lock: these vertices are never collapsed
+        (without ``attributes``, one attribute column of weight 0 is passed to
+        ``meshopt_simplifyWithAttributes``, which alone takes locks).
       target_error: stop once the error would exceed this (relative to the mesh extent:
         the largest side of the bounding box of all ``positions``); the default never stops
         before ``target_triangles``.
@@ -178,9 +180,12 @@ def simplify(
         options |= SIMPLIFY_PRUNE
     abs_target = float(target_error) * extent if extent > 0 else float(target_error)
     abs_target = min(abs_target, 3.0e38)
+    if attributes is None and vertex_lock is not None:
+        # only meshopt_simplifyWithAttributes takes locks: one attribute column of weight 0
+        # (the same collapses as meshopt_simplify otherwise)
+        attributes = np.zeros((pos.shape[0], 1), np.float32)
+        attribute_weights = np.zeros(1, np.float32)
     if attributes is None:
-        if vertex_lock is not None:
-            raise ValueError("vertex_lock needs attributes (meshopt_simplifyWithAttributes)")
         n = lib.meshopt_simplify(
             dest.ctypes.data_as(_c_uint_p), idx.ctypes.data_as(_c_uint_p), idx.size,
             pos.ctypes.data_as(_c_float_p), pos.shape[0], 12,

@@ -331,3 +331,38 @@ def test_stalled_step_falls_back_to_pruning_spider(corpus):
     # without measuring, the choice falls back to the simplifier's estimate: still reached
     quick = build_lod_chain(v, f, uv=uv, normals=n, options=LodOptions(measure=False))
     assert quick.levels[-1].triangles <= 1.1 * round(len(f) / 16)
+
+
+def _wavy_uv_sphere():
+    """The bumpy sphere with UVs that wave across it (continuous, no seams): weighing them
+    costs geometric error, and the worst places of a level are few."""
+    v, f = _bumpy_sphere(4)
+    uv = np.stack([np.sin(9 * v[:, 0]) + v[:, 2], np.cos(7 * v[:, 1]) * v[:, 2]], 1)
+    return v, f, uv.astype(np.float32)
+
+
+def test_geometry_candidate_and_locked_refinement_lower_the_bound():
+    """Each rule is kept only where the estimate says it is closer to level 0; on this mesh
+    both lower the recorded bound at some level and raise it at none (same triangle counts)."""
+    v, f, uv = _wavy_uv_sphere()
+    opts = dict(error_samples=3000)
+
+    def bounds(**kw):
+        chain = build_lod_chain(v, f, uv=uv, options=LodOptions(**opts, **kw))
+        _check_chain(chain, len(v), len(f))
+        return [lv.triangles for lv in chain.levels], [lv.hausdorff_rel for lv in chain.levels]
+
+    counts, both = bounds(lock_fraction=0.7)  # the locks are off by default (docs/BUILD.md)
+    for off in ({"geometry_candidate": False, "lock_fraction": 0.7}, {"lock_fraction": 0.0}):
+        c, without = bounds(**off)
+        assert c == counts
+        assert all(a <= b for a, b in zip(both, without)), (off, both, without)
+        assert any(a < b for a, b in zip(both, without)), (off, both, without)
+
+
+def test_lock_fraction_validated():
+    from assetpipe.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="lock_fraction must be in"):
+        LodOptions(lock_fraction=1.5)
+    LodOptions(lock_fraction=0.0)  # off is allowed

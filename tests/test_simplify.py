@@ -129,3 +129,19 @@ def test_prune_flag_keeps_the_big_part():
     pruned, err = S.simplify(p, t, 300, prune=True)
     assert 0 < len(pruned) <= 300 and np.isfinite(err)
     assert pruned.max() < len(pos)  # the tiny parts went first, the sphere stays
+
+
+def test_vertex_lock_without_attributes():
+    """Locks go through meshopt_simplifyWithAttributes with one weight-0 column: the locked
+    vertices stay, and with nothing locked the result is meshopt_simplify's, index for index."""
+    pos, tri = _sphere(3)
+    plain, _ = S.simplify(pos, tri, 300)
+    none_locked, _ = S.simplify(pos, tri, 300, vertex_lock=np.zeros(len(pos), bool))
+    np.testing.assert_array_equal(plain, none_locked)
+    lock = np.zeros(len(pos), bool)
+    lock[::7] = True
+    out, _ = S.simplify(pos, tri, 300, vertex_lock=lock)
+    assert np.isin(np.flatnonzero(lock), out).all()
+    assert len(out) <= len(tri) and out.max() < len(pos)
+    with pytest.raises(ValueError, match="one entry per vertex"):
+        S.simplify(pos, tri, 300, vertex_lock=lock[:-1])
