@@ -86,7 +86,8 @@ class LodOptions:
       closed either way, but where it wins the UVs' variation inside a chart is not weighed.
       Measured (docs/BUILD.md): beast at gltfpack's 1/8 count went from 1.33x to 1.12x
       gltfpack's Hausdorff distance (100k samples), no other corpus cell got worse by more
-      than the sampling noise.
+      than the sampling noise. Off by default: in the final 1M-sample TABLE 1 it left the share
+      of cells within 1.1x gltfpack where it was (39/44) and cost 18% of beast's chain (CPU).
     lock_fraction: after a step's candidates are ranked, the best regular one is simplified
       again from the same level with the vertices nearest its worst places locked (level 0's
       samples and removed vertices at least ``lock_fraction`` x its largest distance away),
@@ -123,7 +124,7 @@ class LodOptions:
     chain: str = "best"
     merge_meshes: bool = True
     dedupe_triangles: bool = True
-    geometry_candidate: bool = True
+    geometry_candidate: bool = False
     lock_fraction: float = 0.0
 
     def __post_init__(self) -> None:

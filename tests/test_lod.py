@@ -352,8 +352,10 @@ def test_geometry_candidate_and_locked_refinement_lower_the_bound():
         _check_chain(chain, len(v), len(f))
         return [lv.triangles for lv in chain.levels], [lv.hausdorff_rel for lv in chain.levels]
 
-    counts, both = bounds(lock_fraction=0.7)  # the locks are off by default (docs/BUILD.md)
-    for off in ({"geometry_candidate": False, "lock_fraction": 0.7}, {"lock_fraction": 0.0}):
+    # both rules are off by default (docs/BUILD.md): on here
+    counts, both = bounds(geometry_candidate=True, lock_fraction=0.7)
+    for off in ({"geometry_candidate": False, "lock_fraction": 0.7},
+                {"geometry_candidate": True, "lock_fraction": 0.0}):
         c, without = bounds(**off)
         assert c == counts
         assert all(a <= b for a, b in zip(both, without)), (off, both, without)

@@ -288,16 +288,11 @@ def test_open_edges_are_compared_per_mesh() -> None:
 
 
 @pytest.mark.corpus
-def test_sparse_accessors_are_applied_to_the_source_reference() -> None:
+def test_sparse_accessors_are_applied_to_the_source_reference(corpus) -> None:
     """trimesh ignores sparse accessors; the reference applies them (SimpleSparseAccessor moves three
     vertices up to y = 4; trimesh alone reads a maximum of 1)."""
-    import os
-
     from assetpipe.renderer.source_model import load_source_model
 
-    corpus = Path(os.environ.get("ASSETPIPE_CORPUS", "/work/shared/corpus")) / "models"
-    src = corpus / "SimpleSparseAccessor" / "glTF" / "SimpleSparseAccessor.gltf"
-    if not src.is_file():
-        pytest.skip("the shared corpus is not here")
+    src = corpus / "models" / "SimpleSparseAccessor" / "glTF" / "SimpleSparseAccessor.gltf"
     model = load_source_model(src)
     assert model.sidecar["sparseApplied"] and float(model.positions[:, 1].max()) == 4.0
