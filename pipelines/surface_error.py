@@ -310,6 +310,18 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             v, d, f, hint, ub = v[keep], d[keep], f[keep], hint[keep], ub[keep]
         if not v.shape[0]:
             break
+        # convexity over the triangles already known near the cell (corners' and inherited):
+        # a cell settled here needs no centroid query
+        eng = target.engine
+        known = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 4)
+        val, hint = convex_bound(v, known, eng.a, eng.b, eng.c)
+        ub = np.minimum(ub, val)
+        keep = ub > thr
+        if not keep.all():
+            settled = max(settled, float(ub[~keep].max()))
+            v, d, f, hint, ub = v[keep], d[keep], f[keep], hint[keep], ub[keep]
+        if not v.shape[0]:
+            break
         k = v.shape[0]
         if out.queries + k > budget:  # the centroids' queries (the midpoints' are checked below)
             settled = max(settled, float(ub.max()))
