@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from assetpipe.pipelines.distance_kernels import _dist2
+from assetpipe.pipelines.distance_kernels import _dist2, dist2_parts, triangle_parts
 
 #: triangles per leaf at most: 4 measured fastest on the bunny (69k triangles) among 2, 4, 8
 LEAF_SIZE = 4
@@ -194,63 +194,29 @@ def _build(a, b, c, leaf):
 @njit(cache=True, nogil=True)
 def _table(a, b, c, order):
     """Per triangle, in leaf order (a leaf's triangles contiguous in memory), what
-    :func:`_dist2_table` needs that does not depend on the point: corner a, edges ab and ac,
-    their dot products, the determinant, |bc|^2 and whether the triangle is (nearly)
-    degenerate: the same values :func:`pipelines.distance_kernels._dist2` computes, in the same
-    order, so both give bit-identical distances. (M, 15) float64."""
+    :func:`pipelines.distance_kernels.dist2_parts` needs that does not depend on the point
+    (:func:`pipelines.distance_kernels.triangle_parts`): corner a, edges ab and ac, their dot
+    products, the determinant, |bc|^2 and whether the triangle is not degenerate. (M, 15)
+    float64; the distances are bit-identical to ``_dist2``'s."""
     m = order.shape[0]
     t = np.empty((m, 15))
     for j in range(m):
-        f = order[j]
-        ax, ay, az = a[f, 0], a[f, 1], a[f, 2]
-        abx, aby, abz = b[f, 0] - ax, b[f, 1] - ay, b[f, 2] - az
-        acx, acy, acz = c[f, 0] - ax, c[f, 1] - ay, c[f, 2] - az
-        d00 = abx * abx + aby * aby + abz * abz
-        d01 = abx * acx + aby * acy + abz * acz
-        d11 = acx * acx + acy * acy + acz * acz
-        det = d00 * d11 - d01 * d01
-        bcx, bcy, bcz = acx - abx, acy - aby, acz - abz
+        ax, ay, az, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, plane = \
+            triangle_parts(a, b, c, order[j])
         t[j, 0], t[j, 1], t[j, 2] = ax, ay, az
         t[j, 3], t[j, 4], t[j, 5] = abx, aby, abz
         t[j, 6], t[j, 7], t[j, 8] = acx, acy, acz
-        t[j, 9], t[j, 10], t[j, 11], t[j, 12] = d00, d01, d11, det
-        t[j, 13] = bcx * bcx + bcy * bcy + bcz * bcz
-        t[j, 14] = 1.0 if det > 1e-12 * d00 * d11 else 0.0
+        t[j, 9], t[j, 10], t[j, 11], t[j, 12], t[j, 13] = d00, d01, d11, det, dd
+        t[j, 14] = 1.0 if plane else 0.0
     return t
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _dist2_table(px, py, pz, t, f):
     """:func:`pipelines.distance_kernels._dist2` on row f of :func:`_table`."""
-    apx, apy, apz = px - t[f, 0], py - t[f, 1], pz - t[f, 2]
-    abx, aby, abz = t[f, 3], t[f, 4], t[f, 5]
-    acx, acy, acz = t[f, 6], t[f, 7], t[f, 8]
-    d00, d01, d11, det = t[f, 9], t[f, 10], t[f, 11], t[f, 12]
-    d20 = apx * abx + apy * aby + apz * abz
-    d21 = apx * acx + apy * acy + apz * acz
-    if t[f, 14] > 0.0:
-        v = (d11 * d20 - d01 * d21) / det
-        w = (d00 * d21 - d01 * d20) / det
-        if v >= 0.0 and w >= 0.0 and v + w <= 1.0:
-            qx = apx - v * abx - w * acx
-            qy = apy - v * aby - w * acy
-            qz = apz - v * abz - w * acz
-            return qx * qx + qy * qy + qz * qz
-    tt = d20 / d00 if d00 > 0.0 else 0.0
-    tt = min(max(tt, 0.0), 1.0)
-    rx, ry, rz = apx - tt * abx, apy - tt * aby, apz - tt * abz
-    best = rx * rx + ry * ry + rz * rz
-    tt = d21 / d11 if d11 > 0.0 else 0.0
-    tt = min(max(tt, 0.0), 1.0)
-    rx, ry, rz = apx - tt * acx, apy - tt * acy, apz - tt * acz
-    best = min(best, rx * rx + ry * ry + rz * rz)
-    bcx, bcy, bcz = acx - abx, acy - aby, acz - abz
-    wx, wy, wz = apx - abx, apy - aby, apz - abz
-    dd = t[f, 13]
-    tt = (wx * bcx + wy * bcy + wz * bcz) / dd if dd > 0.0 else 0.0
-    tt = min(max(tt, 0.0), 1.0)
-    rx, ry, rz = wx - tt * bcx, wy - tt * bcy, wz - tt * bcz
-    return min(best, rx * rx + ry * ry + rz * rz)
+    return dist2_parts(px - t[f, 0], py - t[f, 1], pz - t[f, 2], t[f, 3], t[f, 4], t[f, 5],
+                       t[f, 6], t[f, 7], t[f, 8], t[f, 9], t[f, 10], t[f, 11], t[f, 12],
+                       t[f, 13], t[f, 14] > 0.0)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -25,23 +25,17 @@ from numba import njit
 _UP = 1.0 + 1e-12  # relative round-up of a bound assembled from rounded float64 values
 
 
-@njit(cache=True, nogil=True)
-def _dist2(px, py, pz, a, b, c, f):
-    """Squared distance from (px, py, pz) to triangle f: the plane where the point projects
-    inside, else the nearest of the three edges (degenerate triangles: edges only)."""
-    ax, ay, az = a[f, 0], a[f, 1], a[f, 2]
-    abx, aby, abz = b[f, 0] - ax, b[f, 1] - ay, b[f, 2] - az
-    acx, acy, acz = c[f, 0] - ax, c[f, 1] - ay, c[f, 2] - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d00 = abx * abx + aby * aby + abz * abz
-    d01 = abx * acx + aby * acy + abz * acz
-    d11 = acx * acx + acy * acy + acz * acz
+@njit(cache=True, nogil=True, inline="always")
+def dist2_parts(apx, apy, apz, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, plane):
+    """Squared distance from a point to a triangle given by what does not depend on the point:
+    ``ap`` = point - a, edges ``ab`` and ``ac``, their dot products ``d00 = ab.ab``,
+    ``d01 = ab.ac``, ``d11 = ac.ac``, ``det = d00 d11 - d01^2``, ``dd = |bc|^2`` and ``plane``
+    (the triangle is not (nearly) degenerate). The plane where the point projects inside, else
+    the nearest of the three edges. One body for :func:`_dist2` and the BVH's precomputed
+    table (:mod:`pipelines.closest_point`), so both give bit-identical distances."""
     d20 = apx * abx + apy * aby + apz * abz
     d21 = apx * acx + apy * acy + apz * acz
-    det = d00 * d11 - d01 * d01
-    # (nearly) degenerate: edges only; never below the true distance (edges belong to the
-    # triangle), above it by at most the sliver's width
-    if det > 1e-12 * d00 * d11:
+    if plane:
         v = (d11 * d20 - d01 * d21) / det
         w = (d00 * d21 - d01 * d20) / det
         if v >= 0.0 and w >= 0.0 and v + w <= 1.0:
@@ -59,11 +53,35 @@ def _dist2(px, py, pz, a, b, c, f):
     best = min(best, rx * rx + ry * ry + rz * rz)
     bcx, bcy, bcz = acx - abx, acy - aby, acz - abz
     wx, wy, wz = apx - abx, apy - aby, apz - abz
-    dd = bcx * bcx + bcy * bcy + bcz * bcz
     t = (wx * bcx + wy * bcy + wz * bcz) / dd if dd > 0.0 else 0.0
     t = min(max(t, 0.0), 1.0)
     rx, ry, rz = wx - t * bcx, wy - t * bcy, wz - t * bcz
     return min(best, rx * rx + ry * ry + rz * rz)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def triangle_parts(a, b, c, f):
+    """What :func:`dist2_parts` needs of triangle f besides the point: (a, ab, ac, d00, d01,
+    d11, det, dd, plane). Degenerate (``det <= 1e-12 d00 d11``): edges only; never below the
+    true distance (edges belong to the triangle), above it by at most the sliver's width."""
+    ax, ay, az = a[f, 0], a[f, 1], a[f, 2]
+    abx, aby, abz = b[f, 0] - ax, b[f, 1] - ay, b[f, 2] - az
+    acx, acy, acz = c[f, 0] - ax, c[f, 1] - ay, c[f, 2] - az
+    d00 = abx * abx + aby * aby + abz * abz
+    d01 = abx * acx + aby * acy + abz * acz
+    d11 = acx * acx + acy * acy + acz * acz
+    det = d00 * d11 - d01 * d01
+    bcx, bcy, bcz = acx - abx, acy - aby, acz - abz
+    dd = bcx * bcx + bcy * bcy + bcz * bcz
+    return ax, ay, az, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, det > 1e-12 * d00 * d11
+
+
+@njit(cache=True, nogil=True)
+def _dist2(px, py, pz, a, b, c, f):
+    """Squared distance from (px, py, pz) to triangle f (see :func:`dist2_parts`)."""
+    ax, ay, az, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, plane = triangle_parts(a, b, c, f)
+    return dist2_parts(px - ax, py - ay, pz - az, abx, aby, abz, acx, acy, acz,
+                       d00, d01, d11, det, dd, plane)
 
 
 @njit(cache=True, nogil=True)
