@@ -345,6 +345,16 @@ class TieredStore:
 
 
 def _is_not_found(exc: BaseException) -> bool:
-    """botocore and friends report a missing key in their own ways."""
-    text = f"{type(exc).__name__} {exc}"
-    return "NoSuchKey" in text or "404" in text or "Not Found" in text
+    """Whether a remote tier's exception says "no such entry" (a cache miss), read from its
+    structure, never its text: a connection error's message holds the endpoint URL, and a port
+    such as 40412 once made an unreachable store pass for an empty one (no notice, every call
+    waiting for its connect timeout). botocore: ``response`` with an error code or HTTP status;
+    aiohttp/requests-style errors: ``status``/``status_code``."""
+    if isinstance(exc, FileNotFoundError):
+        return True
+    response = getattr(exc, "response", None)
+    if isinstance(response, dict):
+        code = str((response.get("Error") or {}).get("Code", ""))
+        status = (response.get("ResponseMetadata") or {}).get("HTTPStatusCode")
+        return code in ("NoSuchKey", "404", "NotFound") or status == 404
+    return 404 in (getattr(exc, "status", None), getattr(exc, "status_code", None))

@@ -139,8 +139,27 @@ def test_shared_folder_url(seeded, models, tmp_path):
     assert list((tmp_path / "shared" / "tmp").iterdir()) == []  # nothing left aside
 
 
-def test_unreachable_remote_builds_locally_and_says_so_once(seeded, models, tmp_path, monkeypatch, caplog):
-    monkeypatch.setenv("AWS_ENDPOINT_URL", f"http://127.0.0.1:{free_port()}")  # nothing listens there
+def _free_port_with_404() -> int:
+    """A free port whose number holds "404" (an unreachable endpoint's error message then does)."""
+    import socket
+
+    for port in (*range(40400, 40500), *range(14040, 14050), *range(24040, 24050)):
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError("no free port with 404 in its number")
+
+
+@pytest.mark.parametrize("port_kind", ["any", "with-404"])
+def test_unreachable_remote_builds_locally_and_says_so_once(seeded, models, tmp_path, monkeypatch, caplog,
+                                                            port_kind):
+    # nothing listens there; the second case once passed for an empty store (the "404" in the URL
+    # of the connection error read as "not found")
+    port = free_port() if port_kind == "any" else _free_port_with_404()
+    monkeypatch.setenv("AWS_ENDPOINT_URL", f"http://127.0.0.1:{port}")
     with caplog.at_level(logging.WARNING, logger="assetpipe.cache"):
         report, store = _build(models, tmp_path / "out", tmp_path / "local", "s3://nowhere/cache")
     assert not report.failed and all(ran for _, ran in _steps(report))
@@ -154,3 +173,18 @@ def test_open_store_chooses_the_tier(tmp_path):
     assert type(open_store(tmp_path / "c")) is Store
     tiered = open_store("s3://bucket/prefix", local=tmp_path / "l")
     assert isinstance(tiered, TieredStore) and tiered.root == tmp_path / "l"
+
+
+def test_not_found_is_read_from_the_error_structure_not_its_text():
+    from botocore.exceptions import ClientError, EndpointConnectionError
+
+    from assetpipe.cache.remote import _is_not_found
+
+    assert _is_not_found(ClientError({"Error": {"Code": "NoSuchKey"}}, "GetObject"))
+    assert _is_not_found(ClientError({"Error": {"Code": "404"}, "ResponseMetadata": {"HTTPStatusCode": 404}},
+                                     "HeadObject"))
+    assert _is_not_found(FileNotFoundError("s3://b/k"))
+    assert not _is_not_found(EndpointConnectionError(endpoint_url="http://127.0.0.1:40412/b/k"))
+    assert not _is_not_found(ClientError({"Error": {"Code": "AccessDenied"},
+                                          "ResponseMetadata": {"HTTPStatusCode": 403}}, "GetObject"))
+    assert not _is_not_found(OSError("Not Found in http://host:4040"))
