@@ -52,7 +52,7 @@ import numpy as np
 
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
-    convex_bound, lipschitz_bound, pair_bound, tri_distance)
+    convex_bound, lipschitz_bound, pair_bound)
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -246,10 +246,6 @@ class _Engine:
             d[miss], faces[miss] = self.tree.query(points[miss])
         return d, faces
 
-    def distance_to(self, points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-        """Exact distance from each point to the given triangle (not the nearest)."""
-        return tri_distance(np.ascontiguousarray(points, dtype=np.float64),
-                            np.ascontiguousarray(faces, dtype=np.int64), self.a, self.b, self.c)
 
 
 # ----------------------------------------------------------------------------- the bound
@@ -288,6 +284,15 @@ class _Direction:
     queries: int = 0
 
 
+def _settle(ub: np.ndarray, thr: float, settled: float, *cells: np.ndarray):
+    """Cells whose bound ``ub`` is within ``thr`` are done: returns (the largest bound settled
+    so far, ``ub`` and each of ``cells`` restricted to the cells still live)."""
+    keep = ub > thr
+    if keep.all():
+        return (settled, ub, *cells)
+    return (max(settled, float(ub[~keep].max())), ub[keep], *(c[keep] for c in cells))
+
+
 def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
                      own: float, lower: float, tolerance: float, budget: int) -> _Direction:
     """Upper bound of ``max over the triangles v of distance to target``.
@@ -304,10 +309,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
     while v.shape[0]:
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         ub = lipschitz_bound(v, d)
-        keep = ub > thr
-        if not keep.all():
-            settled = max(settled, float(ub[~keep].max()))
-            v, d, f, hint, ub = v[keep], d[keep], f[keep], hint[keep], ub[keep]
+        settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
         if not v.shape[0]:
             break
         # convexity over the triangles already known near the cell (corners' and inherited):
@@ -316,10 +318,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         known = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 4)
         val, hint = convex_bound(v, known, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
-        keep = ub > thr
-        if not keep.all():
-            settled = max(settled, float(ub[~keep].max()))
-            v, d, f, hint, ub = v[keep], d[keep], f[keep], hint[keep], ub[keep]
+        settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
         if not v.shape[0]:
             break
         k = v.shape[0]
@@ -339,19 +338,13 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         cand = np.ascontiguousarray(np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 5)
         val, hint = convex_bound(v, cand, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
-        keep = ub > thr
-        if not keep.all():
-            settled = max(settled, float(ub[~keep].max()))
-            v, d, f, hint, ub, fc = v[keep], d[keep], f[keep], hint[keep], ub[keep], fc[keep]
+        settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
         # a cell straddling the edge between two target triangles: cut it along the plane
         # between them and bound each side by its own triangle
         if v.shape[0]:
             others = np.ascontiguousarray(np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1))
             ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded[1]))
-            keep = ub > thr
-            if not keep.all():
-                settled = max(settled, float(ub[~keep].max()))
-                v, d, f, hint, ub, fc = v[keep], d[keep], f[keep], hint[keep], ub[keep], fc[keep]
+            settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
         k = v.shape[0]
         if not k:
             break
