@@ -362,6 +362,14 @@ class ClosestTriangles:
         tree = _build(a, b, c, LEAF_SIZE) if tri.shape[0] else None
         return cls(a, b, c, tree)
 
+    @property
+    def nodes(self) -> tuple | None:
+        """The tree as arrays, for other kernels walking it: ``(box (N, 6) float64: lo xyz,
+        hi xyz; left (N,) int64: first child, -1 for a leaf (the second child is left + 1);
+        first, count (N,) int64: a leaf's slots in order; order (M,) int64: triangle of each
+        slot)``; None for an empty mesh."""
+        return None if self._tree is None else self._tree[:5]
+
     def query(self, points: np.ndarray, radius: np.ndarray | None = None,
               hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(distance (P,) float64, nearest triangle (P,) int64) of each point.

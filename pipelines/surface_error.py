@@ -53,6 +53,7 @@ import numpy as np
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     convex_bound, lipschitz_bound, pair_bound)
+from assetpipe.pipelines.patch_bound import WHY_BOUNDED, WHY_TOO_MANY, patch_bound
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -78,6 +79,8 @@ DEFAULT_WORK_MIN = 400_000
 # (``converged`` False); a tight bound of dense smooth meshes needs about 30 queries a
 # triangle, which this Python refinement cannot afford (docs/BUILD.md).
 DEFAULT_WORK_MAX = 1_000_000
+_STATS = None
+PATCH_BOUND = True  # the height-field bound (pipelines/patch_bound.py); False: without it
 
 
 @dataclass(frozen=True)
@@ -306,10 +309,14 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
     lower = max(lower, out.lower)
     settled = 0.0
     hint = f[:, 0].copy()  # best candidate triangle so far, inherited by children
+    # whether the patch bound is worth trying on a cell: not where it failed on the cell's
+    # parent for the patch's shape (a border, fold or non-manifold edge over it, or no sheet
+    # covering it), which the children mostly inherit
+    retry = np.ones(v.shape[0], dtype=bool)
     while v.shape[0]:
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         ub = lipschitz_bound(v, d)
-        settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
+        settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
         if not v.shape[0]:
             break
         # convexity over the triangles already known near the cell (corners' and inherited):
@@ -318,9 +325,21 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         known = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 4)
         val, hint = convex_bound(v, known, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
-        settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
+        settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
         if not v.shape[0]:
             break
+        # the height field of the target's patch under the cell (pipelines/patch_bound.py):
+        # only triangles within thr of the cell can settle it, so the patch is gathered there
+        if PATCH_BOUND and eng.tree.nodes is not None and retry.any():
+            val, why = patch_bound(v, np.where(retry, thr, np.inf), *eng.tree.nodes, eng.a,
+                                   eng.b, eng.c, target.welded[1])
+            if _STATS is not None:
+                _STATS.append(np.bincount(why[retry], minlength=9))
+            retry &= (why == WHY_BOUNDED) | (why == WHY_TOO_MANY)
+            ub = np.minimum(ub, val)
+            settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
+            if not v.shape[0]:
+                break
         k = v.shape[0]
         if out.queries + k > budget:  # the centroids' queries (the midpoints' are checked below)
             settled = max(settled, float(ub.max()))
@@ -338,13 +357,13 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         cand = np.ascontiguousarray(np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 5)
         val, hint = convex_bound(v, cand, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
-        settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
+        settled, ub, v, d, f, hint, fc, retry = _settle(ub, thr, settled, v, d, f, hint, fc, retry)
         # a cell straddling the edge between two target triangles: cut it along the plane
         # between them and bound each side by its own triangle
         if v.shape[0]:
             others = np.ascontiguousarray(np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1))
             ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded[1]))
-            settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
+            settled, ub, v, d, f, hint, fc, retry = _settle(ub, thr, settled, v, d, f, hint, fc, retry)
         k = v.shape[0]
         if not k:
             break
@@ -383,6 +402,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
                             ((f[:, 0], fm[:, 0], fm[:, 2]), (fm[:, 0], f[:, 1], fm[:, 1]),
                              (fm[:, 2], fm[:, 1], f[:, 2]), (fm[:, 0], fm[:, 1], fm[:, 2]))])
         hint = np.tile(hint, 4)
+        retry = np.tile(retry, 4)
     out.upper = max(settled, out.lower)
     return out
 

@@ -1,0 +1,373 @@
+"""The height-field ("patch") bound: the largest distance from a triangle cell to a target
+mesh, bounded in one step when the target's nearby patch lies over the whole cell.
+
+Why: the branch and bound of :mod:`pipelines.surface_error` settles a cell by convexity
+(``d_target <= d_F`` for one target triangle F) or by the two-triangle pair bound. A cell of a
+coarse level spans many level-0 triangles, and near a level-0 vertex where several faces meet
+neither bound is tight, so cells had to shrink to about level 0's triangle size before they
+settled: on the bunny the level -> level-0 direction made 80% of the bound's queries, about 29
+a cell (docs/BUILD.md). This bound settles such a cell without splitting it.
+
+The bound. Put the cell T in its own frame: T in the plane z = 0, its normal the z axis. Let P
+be the target triangles whose boxes meet T's box grown by ``rho`` (the patch). For a point p of
+T and a triangle F of P whose projection onto the plane contains p, the vertical line through
+p meets F at height ``z_F(p)``, so ``d_target(p) <= |z_F(p)|`` (a point of F at that distance).
+If the projections of the triangles of a sheet S of P (below) *cover* T, then
+
+    max over T of d_target  <=  max over F in S of  max over pi(F) n T of |z_F|,
+
+and ``z_F`` is linear over ``pi(F) n T`` (a convex polygon: F's projection clipped by T), so
+its largest ``|z_F|`` is at one of the polygon's corners. That is the value returned.
+
+Coverage, proven from the patch's combinatorics (no sampling). Of P, the sheet S is kept:
+the triangles reaching into T (by more than a margin ``m``, 1e-12 of T's size) that face the
+way most of the projected area faces (so the far side of a thin part and faces seen edge-on
+stay out: leaving triangles out can only make the proof fail, never wrong). Let ``c(p)`` be
+the number of S's projected triangles containing p. Moving p across T, ``c`` changes only
+where p crosses the projection of an edge of S. Every edge of S reaching into T is checked to
+be *interior and unfolded*: shared by exactly two triangles of S (over welded vertices) whose
+third corners project strictly on opposite sides of its line; crossing it, one triangle ends
+and the other begins, so ``c`` does not change. Hence ``c`` is one constant ``k`` on T shrunk
+by ``m``, the clipped areas sum to about ``k * area(T)``, and ``k >= 1`` when that sum is at
+least half of T's area (the strip within ``m`` of the border holds at most a quarter of it,
+counted once per triangle: cells thinner than that, inradius <= 8 PATCH_MAX m, are skipped).
+A point of T within ``m`` of its border (where edges reaching less
+than ``m`` in were not checked) is within ``m * size / inradius`` of a covered point, and the
+distance is 1-Lipschitz: that much is added. Anything else (a border or non-manifold edge over
+T, a fold, no sheet covering it, too many triangles, a sliver cell) returns ``inf`` with the
+reason (``WHY_*``): the caller's other bounds and subdivision take the cell, as before.
+
+Rounding: corner heights are direct dot products (relative error ~1e-16 of coordinates of
+order 1: the local frame has a unit diagonal). The height at a clip corner is interpolated
+only over a well-conditioned projected triangle (its projected area at least ``1e-3`` of its
+longest projected edge squared, and its plane's normal within ``acos(0.1)`` of the z axis, so
+the slope is at most about 10); otherwise the triangle's largest corner height is used, which
+bounds ``|z_F|`` on all of ``pi(F)`` (linear, so largest at a corner). Side tests require a
+margin of ``1e-12`` of the cell's size squared. The result is rounded up by a relative
+``1e-12`` and an absolute ``1e-13``.
+
+Array contracts: cells ``v (K, 3, 3) float64``; ``rho (K,) float64`` (>= 0; inf: skip the cell);
+the target's BVH arrays as :class:`pipelines.closest_point.ClosestTriangles` holds them
+(``box (N, 6)``, ``left``, ``first``, ``count``, ``order`` int64); corners ``a, b, c (F, 3)
+float64``; ``wtri (F, 3) int64`` the target's triangles over welded vertex ids (equal id: equal
+position). Returns ``(K,) float64``: an upper bound of the cell's largest distance, or inf.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: triangles of a patch at most (more: the cell is left to subdivision)
+PATCH_MAX = 192
+_STACK = 128
+_ORIENT_MARGIN = 1e-12   # side tests: margin, times the cell's size squared
+_WELL_SHAPED = 1e-3      # projected area >= this x longest projected edge^2: interpolate
+_MIN_COS = 0.1           # and the plane's normal within acos(0.1) of the cell's normal
+_UP_REL = 1e-12
+_UP_ABS = 1e-13
+
+# why a cell got its value
+WHY_BOUNDED = 0    # bounded
+WHY_SKIPPED = 1    # no radius, or a sliver cell
+WHY_TOO_MANY = 2   # more than PATCH_MAX triangles near the cell
+WHY_UNCOVERED = 3  # no triangle near, or the projections cover no point of it
+WHY_BORDER = 4     # an edge over the cell has one triangle of the patch (a border)
+WHY_NON_MANIFOLD = 5  # an edge over the cell has more than two
+WHY_FOLDED = 6     # an edge over the cell has both triangles on one side (a fold)
+
+
+@njit(cache=True, nogil=True)
+def _overlap(box, left, first, count, order, lo, hi, out, stack):
+    """Triangles whose box meets [lo, hi] into ``out``; their number, or -1 if more than
+    ``out`` holds."""
+    n = 0
+    top = 1
+    stack[0] = 0
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        if (box[node, 0] > hi[0] or box[node, 1] > hi[1] or box[node, 2] > hi[2]
+                or box[node, 3] < lo[0] or box[node, 4] < lo[1] or box[node, 5] < lo[2]):
+            continue
+        l = left[node]
+        if l < 0:
+            for j in range(first[node], first[node] + count[node]):
+                if n >= out.shape[0]:
+                    return -1
+                out[n] = order[j]
+                n += 1
+            continue
+        if top + 2 > stack.shape[0]:
+            return -1
+        stack[top] = l
+        stack[top + 1] = l + 1
+        top += 2
+    return n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _orient(ax, ay, bx, by, cx, cy):
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@njit(cache=True, nogil=True)
+def _separated(px, py, m, tx, ty, margin):
+    """Whether the convex polygon (px, py)[:m] is separated from triangle (tx, ty) (CCW) by
+    more than ``margin`` along one of the edge normals of either (exact separating-axis test
+    for convex shapes in 2D; a segment is a 2-gon). False means they may touch."""
+    # the triangle's edges: the polygon entirely to the right of one of them
+    for e in range(3):
+        x0, y0 = tx[e], ty[e]
+        x1, y1 = tx[(e + 1) % 3], ty[(e + 1) % 3]
+        ex, ey = x1 - x0, y1 - y0
+        ln = np.sqrt(ex * ex + ey * ey)
+        if not ln > 0.0:
+            continue
+        allout = True
+        for q in range(m):
+            if (ex * (py[q] - y0) - ey * (px[q] - x0)) / ln > -margin:
+                allout = False
+                break
+        if allout:
+            return True
+    # the polygon's edges (either normal direction: the polygon's orientation is not known)
+    for e in range(m if m > 2 else 1):
+        x0, y0 = px[e], py[e]
+        x1, y1 = px[(e + 1) % m], py[(e + 1) % m]
+        ex, ey = x1 - x0, y1 - y0
+        ln = np.sqrt(ex * ex + ey * ey)
+        if not ln > 0.0:
+            continue
+        smin, smax = np.inf, -np.inf
+        for q in range(m):
+            s = (ex * (py[q] - y0) - ey * (px[q] - x0)) / ln
+            smin, smax = min(smin, s), max(smax, s)
+        tmin, tmax = np.inf, -np.inf
+        for q in range(3):
+            s = (ex * (ty[q] - y0) - ey * (tx[q] - x0)) / ln
+            tmin, tmax = min(tmin, s), max(tmax, s)
+        if tmin > smax + margin or tmax < smin - margin:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _clip(px, py, tx, ty, ox, oy, bx, by):
+    """Triangle (px, py) clipped by triangle (tx, ty) (CCW): the polygon's corners into
+    (ox, oy) (at most 9), their number. ``bx, by`` scratch of the same size."""
+    m = 3
+    for q in range(3):
+        ox[q], oy[q] = px[q], py[q]
+    for e in range(3):
+        x0, y0 = tx[e], ty[e]
+        x1, y1 = tx[(e + 1) % 3], ty[(e + 1) % 3]
+        ex, ey = x1 - x0, y1 - y0
+        n = 0
+        for q in range(m):
+            cx, cy = ox[q], oy[q]
+            dx, dy = ox[(q + 1) % m], oy[(q + 1) % m]
+            sc = ex * (cy - y0) - ey * (cx - x0)
+            sd = ex * (dy - y0) - ey * (dx - x0)
+            if sc >= 0.0:
+                bx[n], by[n] = cx, cy
+                n += 1
+            if (sc >= 0.0) != (sd >= 0.0):
+                t = sc / (sc - sd)
+                bx[n], by[n] = cx + t * (dx - cx), cy + t * (dy - cy)
+                n += 1
+        m = n
+        for q in range(m):
+            ox[q], oy[q] = bx[q], by[q]
+        if m == 0:
+            return 0
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _height(fx, fy, fz, j, ar, ox, oy, mc):
+    """Largest |z| of triangle j's plane over its projection clipped to (ox, oy)[:mc]:
+    interpolated at the polygon's corners when the projection is well-shaped and not too
+    steep, else (and never above) the triangle's largest corner height."""
+    zc = max(abs(fz[j, 0]), abs(fz[j, 1]), abs(fz[j, 2]))
+    l01 = (fx[j, 1] - fx[j, 0]) ** 2 + (fy[j, 1] - fy[j, 0]) ** 2
+    l12 = (fx[j, 2] - fx[j, 1]) ** 2 + (fy[j, 2] - fy[j, 1]) ** 2
+    l20 = (fx[j, 0] - fx[j, 2]) ** 2 + (fy[j, 0] - fy[j, 2]) ** 2
+    # twice F's true area, for its plane's tilt: cos = projected / true area
+    ux, uy, uz = fx[j, 1] - fx[j, 0], fy[j, 1] - fy[j, 0], fz[j, 1] - fz[j, 0]
+    wx, wy, wz = fx[j, 2] - fx[j, 0], fy[j, 2] - fy[j, 0], fz[j, 2] - fz[j, 0]
+    cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+    a3 = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if abs(ar) >= _WELL_SHAPED * max(l01, l12, l20) and abs(ar) >= _MIN_COS * a3:
+        zmax = 0.0
+        for q in range(mc):
+            w1 = _orient(fx[j, 0], fy[j, 0], ox[q], oy[q], fx[j, 2], fy[j, 2]) / ar
+            w2 = _orient(fx[j, 0], fy[j, 0], fx[j, 1], fy[j, 1], ox[q], oy[q]) / ar
+            z = fz[j, 0] + w1 * (fz[j, 1] - fz[j, 0]) + w2 * (fz[j, 2] - fz[j, 0])
+            zmax = max(zmax, abs(z))
+        zc = min(zc, zmax)
+    return zc
+
+
+@njit(cache=True, nogil=True)
+def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
+    """See the module docstring. Returns ((K,) float64 upper bounds, inf where the patch bound
+    does not apply; (K,) int8 why: one of the ``WHY_*`` codes)."""
+    k = v.shape[0]
+    out = np.full(k, np.inf)
+    why = np.full(k, WHY_SKIPPED, dtype=np.int8)
+    sel = np.empty(PATCH_MAX, dtype=np.int64)
+    stack = np.empty(_STACK, dtype=np.int64)
+    fx = np.empty((PATCH_MAX, 3))
+    fy = np.empty((PATCH_MAX, 3))
+    fz = np.empty((PATCH_MAX, 3))
+    far_ = np.empty(PATCH_MAX)          # twice the signed projected area
+    side = np.zeros(PATCH_MAX, dtype=np.int8)   # +1 / -1: reaches into T, facing so; 0: not
+    zmax = np.empty(PATCH_MAX)
+    ekey = np.empty(3 * PATCH_MAX, dtype=np.int64)
+    eref = np.empty(3 * PATCH_MAX, dtype=np.int64)   # 3 * slot + edge
+    lo = np.empty(3)
+    hi = np.empty(3)
+    tx = np.empty(3)
+    ty = np.empty(3)
+    ox = np.empty(12)
+    oy = np.empty(12)
+    bx = np.empty(12)
+    by = np.empty(12)
+    sx = np.empty(2)
+    sy = np.empty(2)
+    for i in range(k):
+        r = rho[i]
+        if not (r >= 0.0 and r < np.inf):
+            continue
+        p0x, p0y, p0z = v[i, 0, 0], v[i, 0, 1], v[i, 0, 2]
+        e1x, e1y, e1z = v[i, 1, 0] - p0x, v[i, 1, 1] - p0y, v[i, 1, 2] - p0z
+        gx, gy, gz = v[i, 2, 0] - p0x, v[i, 2, 1] - p0y, v[i, 2, 2] - p0z
+        nx, ny, nz = e1y * gz - e1z * gy, e1z * gx - e1x * gz, e1x * gy - e1y * gx
+        nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+        l1 = np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+        if not (nn > 0.0 and l1 > 0.0):
+            continue
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+        e1x, e1y, e1z = e1x / l1, e1y / l1, e1z / l1
+        # e2 = n x e1
+        e2x, e2y, e2z = ny * e1z - nz * e1y, nz * e1x - nx * e1z, nx * e1y - ny * e1x
+        tx[0], ty[0] = 0.0, 0.0
+        tx[1], ty[1] = l1, 0.0
+        tx[2], ty[2] = gx * e1x + gy * e1y + gz * e1z, gx * e2x + gy * e2y + gz * e2z
+        area_t = 0.5 * _orient(tx[0], ty[0], tx[1], ty[1], tx[2], ty[2])
+        l2 = np.sqrt(gx * gx + gy * gy + gz * gz)
+        l3 = np.sqrt((tx[2] - l1) ** 2 + ty[2] ** 2)
+        size = max(l1, l2, l3)
+        perim = l1 + l2 + l3
+        margin = _ORIENT_MARGIN * size
+        margin2 = _ORIENT_MARGIN * size * size
+        # a sliver cell (inradius 2 area / perimeter): left to the other bounds
+        if not 2.0 * area_t / perim > 8.0 * PATCH_MAX * margin:
+            continue
+        for q in range(3):
+            lo[q] = min(v[i, 0, q], v[i, 1, q], v[i, 2, q]) - r
+            hi[q] = max(v[i, 0, q], v[i, 1, q], v[i, 2, q]) + r
+        m = _overlap(box, left, first, count, order, lo, hi, sel, stack)
+        if m <= 0:
+            why[i] = WHY_TOO_MANY if m < 0 else WHY_UNCOVERED
+            continue
+        # project; each triangle reaching into T (deeper than margin): the sign of its
+        # projected area, the area of its projection clipped by T, its largest height there
+        area_pos = 0.0
+        area_neg = 0.0
+        for j in range(m):
+            f = sel[j]
+            for q in range(3):
+                if q == 0:
+                    qx, qy, qz = a[f, 0] - p0x, a[f, 1] - p0y, a[f, 2] - p0z
+                elif q == 1:
+                    qx, qy, qz = b[f, 0] - p0x, b[f, 1] - p0y, b[f, 2] - p0z
+                else:
+                    qx, qy, qz = c[f, 0] - p0x, c[f, 1] - p0y, c[f, 2] - p0z
+                fx[j, q] = qx * e1x + qy * e1y + qz * e1z
+                fy[j, q] = qx * e2x + qy * e2y + qz * e2z
+                fz[j, q] = qx * nx + qy * ny + qz * nz
+            ar = _orient(fx[j, 0], fy[j, 0], fx[j, 1], fy[j, 1], fx[j, 2], fy[j, 2])
+            far_[j] = ar
+            side[j] = 0
+            if not abs(ar) > margin2 or _separated(fx[j], fy[j], 3, tx, ty, -margin):
+                continue  # seen edge-on (no area), or not reaching into T
+            mc = _clip(fx[j], fy[j], tx, ty, ox, oy, bx, by)
+            if mc == 0:
+                continue
+            s = 0.0
+            for q in range(mc):
+                s += ox[q] * oy[(q + 1) % mc] - ox[(q + 1) % mc] * oy[q]
+            if ar > 0.0:
+                area_pos += 0.5 * abs(s)
+                side[j] = 1
+            else:
+                area_neg += 0.5 * abs(s)
+                side[j] = -1
+            zmax[j] = _height(fx, fy, fz, j, ar, ox, oy, mc)
+        # the patch S: the triangles reaching into T that face the way most of the projected
+        # area faces (one sheet: the facing-away sheet of a thin part and faces seen edge-on
+        # stay out; leaving triangles out can only make the proof fail, never wrong)
+        sg = 1 if area_pos >= area_neg else -1
+        if not max(area_pos, area_neg) >= 0.5 * area_t:
+            why[i] = WHY_UNCOVERED
+            continue
+        best = 0.0
+        ne = 0
+        for j in range(m):
+            if side[j] != sg:
+                continue
+            best = max(best, zmax[j])
+            f = sel[j]
+            for e in range(3):
+                u, w = wtri[f, e], wtri[f, (e + 1) % 3]
+                ekey[ne] = (min(u, w) << 32) | max(u, w)
+                eref[ne] = 3 * j + e
+                ne += 1
+        # every edge of S reaching into T: interior to S (exactly two triangles of S) and
+        # unfolded (their third corners strictly on opposite sides of its line)
+        perm = np.argsort(ekey[:ne])
+        ok = True
+        q0 = 0
+        while q0 < ne and ok:
+            q1 = q0 + 1
+            while q1 < ne and ekey[perm[q1]] == ekey[perm[q0]]:
+                q1 += 1
+            reaching = False
+            for q in range(q0, q1):
+                j, e = eref[perm[q]] // 3, eref[perm[q]] % 3
+                sx[0], sy[0] = fx[j, e], fy[j, e]
+                sx[1], sy[1] = fx[j, (e + 1) % 3], fy[j, (e + 1) % 3]
+                if not _separated(sx, sy, 2, tx, ty, -margin):
+                    reaching = True
+                    break
+            if reaching:
+                if q1 - q0 != 2:
+                    ok = False
+                    why[i] = WHY_BORDER if q1 - q0 == 1 else WHY_NON_MANIFOLD
+                    break
+                ja, ea = eref[perm[q0]] // 3, eref[perm[q0]] % 3
+                jb, eb = eref[perm[q0 + 1]] // 3, eref[perm[q0 + 1]] % 3
+                if wtri[sel[ja], ea] == wtri[sel[ja], (ea + 1) % 3]:
+                    ok = False  # a degenerate edge (one welded vertex)
+                    why[i] = WHY_FOLDED
+                    break
+                # the edge's line (from triangle ja), each triangle's third corner
+                s1 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
+                             fx[ja, (ea + 2) % 3], fy[ja, (ea + 2) % 3])
+                s2 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
+                             fx[jb, (eb + 2) % 3], fy[jb, (eb + 2) % 3])
+                if not ((s1 > margin2 and s2 < -margin2) or (s1 < -margin2 and s2 > margin2)):
+                    ok = False
+                    why[i] = WHY_FOLDED
+                    break
+            q0 = q1
+        if ok:
+            # points within ``margin`` of T's border may be uncovered (edges reaching less
+            # than that into T are not checked): each is within margin * size / inradius of
+            # a covered point, and the distance is 1-Lipschitz
+            slack = margin * perim * size / (2.0 * area_t)
+            out[i] = (best + slack) * (1.0 + _UP_REL) + _UP_ABS
+            why[i] = WHY_BOUNDED
+    return out, why

@@ -1,0 +1,161 @@
+"""The height-field ("patch") bound (pipelines/patch_bound.py) against dense brute force: every
+value it gives must be at least the largest exact distance found on the cell, and it must say
+it cannot bound a cell over a hole, a fold or a non-manifold edge."""
+
+import numpy as np
+import pytest
+
+from assetpipe.pipelines.closest_point import ClosestTriangles
+from assetpipe.pipelines.patch_bound import (
+    PATCH_MAX, WHY_BORDER, WHY_BOUNDED, WHY_FOLDED, WHY_NON_MANIFOLD, WHY_TOO_MANY, patch_bound)
+from assetpipe.pipelines.surface_error import points_to_mesh_distance
+
+
+def _grid(n, f, lo=0.0, hi=1.0):
+    """A height field z = f(x, y) over [lo, hi]^2: (n*n, 3) positions, (2(n-1)^2, 3) triangles,
+    counter-clockwise seen from +z."""
+    x, y = np.meshgrid(np.linspace(lo, hi, n), np.linspace(lo, hi, n))
+    pos = np.stack([x.ravel(), y.ravel(), f(x, y).ravel()], 1)
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    return pos, np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+
+
+def _bound(pos, tri, cells, rho):
+    tree = ClosestTriangles.build(pos, tri)
+    _, inv = np.unique(pos, axis=0, return_inverse=True)
+    wtri = inv.reshape(-1)[tri]
+    cells = np.ascontiguousarray(cells, dtype=np.float64)
+    return patch_bound(cells, np.full(cells.shape[0], rho), *tree.nodes, tree.a, tree.b, tree.c,
+                       np.ascontiguousarray(wtri, dtype=np.int64))
+
+
+def _dense_max(cell, pos, tri, rng, n=3000):
+    """Largest exact distance over n random points of the cell and its corners (a lower
+    value of the true maximum)."""
+    u = rng.random((n, 2))
+    flip = u.sum(1) > 1
+    u[flip] = 1 - u[flip]
+    p = cell[0] + u[:, :1] * (cell[1] - cell[0]) + u[:, 1:] * (cell[2] - cell[0])
+    return points_to_mesh_distance(np.concatenate([p, cell]), pos, tri).max()
+
+
+def _bump(x, y):
+    return 0.05 * np.sin(7 * x) * np.cos(5 * y)
+
+
+@pytest.mark.parametrize("lift", [0.0, 0.01, -0.02])
+def test_bumpy_surface_bounded_tightly_and_never_below_the_truth(lift):
+    rng = np.random.default_rng(1)
+    pos, tri = _grid(17, _bump)
+    # a coarse level of the same surface (corners on it), inside the fine one's border: a cell
+    # reaching over the border is not covered (the border's projection dips into it)
+    cpos, ctri = _grid(6, _bump, 0.1, 0.9)
+    cells = cpos[ctri] + np.array([0.0, 0.0, lift])
+    val, why = _bound(pos, tri, cells, 0.05)
+    ok = np.flatnonzero(why == WHY_BOUNDED)
+    assert ok.size == cells.shape[0]
+    ratio = []
+    for i in ok:
+        dense = _dense_max(cells[i], pos, tri, rng)
+        assert val[i] >= dense, (i, val[i], dense)
+        ratio.append(val[i] / dense)
+    # tight: vertical distance over a gently sloped surface, at most its 1/cos (slope of the
+    # bumps up to 0.35: 1/cos <= 1.06), measured 1.00-1.03 here
+    assert np.median(ratio) < 1.03 and max(ratio) < 1.07
+
+
+def test_sphere_level_bounded_from_both_sides():
+    import trimesh
+
+    rng = np.random.default_rng(2)
+    fine, coarse = trimesh.creation.icosphere(4), trimesh.creation.icosphere(2)
+    pos, tri = np.asarray(fine.vertices, float), np.asarray(fine.faces)
+    cells = np.asarray(coarse.vertices)[coarse.faces]
+    val, why = _bound(pos, tri, cells, 0.05)
+    assert (why == WHY_BOUNDED).all()
+    for i in rng.choice(cells.shape[0], 40, replace=False):
+        assert val[i] >= _dense_max(cells[i], pos, tri, rng)
+    # and the other way: fine cells against the coarse level (cells on a chord's plane side)
+    val2, why2 = _bound(np.asarray(coarse.vertices, float), np.asarray(coarse.faces), pos[tri], 0.05)
+    assert (why2 == WHY_BOUNDED).mean() > 0.9
+    for i in rng.choice(np.flatnonzero(why2 == WHY_BOUNDED), 40, replace=False):
+        assert val2[i] >= _dense_max(pos[tri][i], np.asarray(coarse.vertices, float),
+                                     np.asarray(coarse.faces), rng)
+
+
+def test_hole_under_the_cell_is_not_bounded():
+    pos, tri = _grid(9, lambda x, y: 0 * x)
+    cell = np.array([[[0.2, 0.2, 0.01], [0.8, 0.2, 0.01], [0.5, 0.8, 0.01]]])
+    # the triangle under the middle of the cell removed: a hole the vertical lines fall through
+    centre = pos[tri].mean(axis=1)
+    hole = np.argmin(np.linalg.norm(centre[:, :2] - [0.5, 0.4], axis=1))
+    val, why = _bound(pos, np.delete(tri, hole, axis=0), cell, 0.1)
+    assert why[0] == WHY_BORDER and val[0] == np.inf
+    # without the hole: bounded, at the cell's height
+    val, why = _bound(pos, tri, cell, 0.1)
+    assert why[0] == WHY_BOUNDED and 0.01 <= val[0] < 0.01 * (1 + 1e-6)
+
+
+def test_fold_under_the_cell_is_not_bounded():
+    # a sheet folded back under itself along x = 0.5 (a Z shape seen from the side): the
+    # upper part's vertical lines meet the folded part first
+    pos, tri = _grid(9, lambda x, y: 0 * x)
+    over = pos.copy()
+    over[:, 0] = 1.0 - over[:, 0] * 0.5          # x in [0.5, 1], mirrored
+    over[:, 2] = 0.05 - pos[:, 0] * 0.05          # rising back to z = 0.05 at x = 0.5
+    n = pos.shape[0]
+    # glue the two along x = 0.5... approximately: the folded copy shares no vertex, so its
+    # edge over the cell is a border; the fold itself, with shared vertices, is a fold
+    allpos = np.concatenate([pos, over])
+    alltri = np.concatenate([tri, tri[:, ::-1] + n])  # the folded copy faces down
+    cell = np.array([[[0.55, 0.2, 0.1], [0.95, 0.2, 0.1], [0.75, 0.8, 0.1]]])
+    val, why = _bound(allpos, alltri, cell, 0.2)
+    # whatever the verdict, a value given is never below the truth
+    rng = np.random.default_rng(4)
+    if why[0] == WHY_BOUNDED:
+        assert val[0] >= _dense_max(cell[0], allpos, alltri, rng)
+    # a true fold with shared vertices: an accordion z = |saw(x)| whose middle vertices are
+    # pulled past their neighbours in x, so two triangles of one edge lie on one side of it
+    pos2, tri2 = _grid(9, lambda x, y: 0 * x)
+    col = np.isclose(pos2[:, 0], 0.5)
+    pos2[col, 0] = 0.7  # the column x = 0.5 moved past x = 0.625: its triangles fold over
+    pos2[col, 2] = 0.02
+    cell2 = np.array([[[0.3, 0.1, 0.05], [0.9, 0.1, 0.05], [0.6, 0.9, 0.05]]])
+    val2, why2 = _bound(pos2, tri2, cell2, 0.2)
+    assert why2[0] in (WHY_FOLDED, WHY_BORDER) and val2[0] == np.inf
+
+
+def test_fin_on_an_edge_under_the_cell_is_not_bounded():
+    pos, tri = _grid(9, lambda x, y: 0 * x)
+    # a fin on the edge of triangle 20, tilted so it faces up like the sheet
+    t = tri[20]
+    tip = pos[t[:2]].mean(axis=0) + np.array([0.05, 0.05, 0.03])
+    pos2 = np.concatenate([pos, tip[None]])
+    tri2 = np.concatenate([tri, [[t[0], t[1], pos.shape[0]]]])
+    c = pos[t].mean(axis=0)
+    cell = np.array([[c + [-0.2, -0.2, 0.05], c + [0.2, -0.2, 0.05], c + [0.0, 0.25, 0.05]]])
+    val, why = _bound(pos2, tri2, cell, 0.2)
+    # the edge has three triangles, and the fin's free edges are borders over the cell
+    assert why[0] in (WHY_NON_MANIFOLD, WHY_BORDER) and val[0] == np.inf
+
+
+def test_too_many_triangles_near_the_cell():
+    pos, tri = _grid(41, lambda x, y: 0 * x)  # 3200 triangles under one big cell
+    assert tri.shape[0] > PATCH_MAX
+    cell = np.array([[[0.0, 0.0, 0.01], [1.0, 0.0, 0.01], [0.0, 1.0, 0.01]]])
+    val, why = _bound(pos, tri, cell, 0.1)
+    assert why[0] == WHY_TOO_MANY and val[0] == np.inf
+
+
+def test_random_noisy_surfaces_never_below_dense_samples():
+    # rough surfaces with slivers and steep parts: whatever is bounded holds
+    rng = np.random.default_rng(7)
+    for trial in range(4):
+        pos, tri = _grid(21, lambda x, y: 0.03 * np.sin(11 * x + trial) * np.cos(13 * y))
+        pos = pos + rng.normal(scale=0.004, size=pos.shape) * [1, 1, 3]
+        cpos, ctri = _grid(6, lambda x, y: 0 * x, 0.05, 0.95)
+        cells = cpos[ctri] + rng.normal(scale=0.01, size=(ctri.shape[0], 3, 3))
+        val, why = _bound(pos, tri, cells, 0.1)
+        for i in np.flatnonzero(why == WHY_BOUNDED):
+            assert val[i] >= _dense_max(cells[i], pos, tri, rng, 1500), (trial, i)
