@@ -79,7 +79,6 @@ DEFAULT_WORK_MIN = 400_000
 # (``converged`` False); a tight bound of dense smooth meshes needs about 30 queries a
 # triangle, which this Python refinement cannot afford (docs/BUILD.md).
 DEFAULT_WORK_MAX = 1_000_000
-_STATS = None
 PATCH_BOUND = True  # the height-field bound (pipelines/patch_bound.py); False: without it
 
 
@@ -333,8 +332,6 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         if PATCH_BOUND and eng.tree.nodes is not None and retry.any():
             val, why = patch_bound(v, np.where(retry, thr, np.inf), *eng.tree.nodes, eng.a,
                                    eng.b, eng.c, target.welded[1])
-            if _STATS is not None:
-                _STATS.append(np.bincount(why[retry], minlength=9))
             retry &= (why == WHY_BOUNDED) | (why == WHY_TOO_MANY)
             ub = np.minimum(ub, val)
             settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
