@@ -33,8 +33,8 @@ import math
 import numpy as np
 from numba import njit
 
-# a draw list with fewer triangles than this, or fewer than one per pixel, is drawn whole: both the
-# test and what it would save are then a few milliseconds
+# a draw list with fewer triangles than this is drawn whole: the test and what it could save are
+# then a few milliseconds (the kernel takes about 10-30 ns a triangle, lavapipe 100-200 ns)
 CULL_MIN_TRIANGLES = 1 << 16
 _U = 2.0 ** -24       # float32 unit roundoff
 _GAMMA = 16 * _U      # a float32 mat4 x vec4 and the division by w, with room (see above)
@@ -42,7 +42,7 @@ _SNAP_PX = 1.0 / 256  # lavapipe's sub-pixel step (8 bits of fixed point)
 
 
 @njit(cache=True, nogil=True)
-def _cull(pt, m, extent, width, height, corners, local, starts, out, counts):  # pragma: no cover - compiled
+def _cull(pt, m, extent, width, height, indices, draws, out, counts):  # pragma: no cover - compiled
     n = pt.shape[1]
     px = np.empty(n)
     py = np.empty(n)
@@ -83,14 +83,16 @@ def _cull(pt, m, extent, width, height, corners, local, starts, out, counts):  #
         else:
             box[i, 0], box[i, 1], box[i, 2], box[i, 3] = 0, width - 1, 0, height - 1
     k = 0
-    for d in range(starts.shape[0] - 1):
+    for d in range(draws.shape[0]):
         k0 = k
-        for t in range(starts[d], starts[d + 1]):
-            a, b, c = corners[0, t], corners[1, t], corners[2, t]
+        first, count, base = draws[d, 0], draws[d, 1], draws[d, 2]
+        for i in range(first, first + count - 2, 3):
+            ia, ib, ic = indices[i], indices[i + 1], indices[i + 2]
+            a, b, c = ia + base, ib + base, ic + base
             if (min(box[a, 0], box[b, 0], box[c, 0]) <= max(box[a, 1], box[b, 1], box[c, 1])
                     and min(box[a, 2], box[b, 2], box[c, 2]) <= max(box[a, 3], box[b, 3], box[c, 3])):
-                out[k, 0], out[k, 1], out[k, 2] = local[t, 0], local[t, 1], local[t, 2]
-                k += 1
+                out[k], out[k + 1], out[k + 2] = ia, ib, ic
+                k += 3
         counts[d] = k - k0
     return k
 
@@ -104,30 +106,28 @@ class Projector:
         self.extent = np.abs(self.pt).max(axis=1).astype(np.float64) if self.pt.size else np.zeros(3)
 
 
-def cull(proj: Projector, corners: np.ndarray, local: np.ndarray, starts: np.ndarray, view_proj: np.ndarray,
-         width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """The triangles that may cover a pixel centre of a ``width`` x ``height`` picture.
+def cull(proj: Projector, indices: np.ndarray, draws: np.ndarray, view_proj: np.ndarray, width: int,
+         height: int) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of ``draws`` that may cover a pixel centre of a ``width`` x ``height`` picture.
 
-    ``corners`` (3, T) int32: each triangle's vertex-buffer indices; ``local`` (T, 3) uint32: its
-    index-buffer row (what is drawn); ``starts`` (D + 1,) int64: draw d's triangles are
-    ``starts[d]:starts[d + 1]``; ``view_proj`` (4, 4) the camera's (row-major, Vulkan clip space;
-    the viewport maps NDC -1..1 to 0..width and 0..height). Returns (kept rows (K, 3) uint32 in
-    draw order, kept triangles per draw (D,) int64). Every triangle is kept when a position is not
-    finite."""
+    ``indices`` (M,) uint32: the index buffer; ``draws`` (D, 3) int64: per draw its first index,
+    index count (whole triangles) and vertex offset (the indices are local to it); ``view_proj``
+    (4, 4) the camera's (row-major, Vulkan clip space; the viewport maps NDC -1..1 to 0..width
+    and 0..height). Returns (the kept triangles' indices (K,) uint32 in draw order, indices kept
+    per draw (D,) int64). Every triangle is kept when a position is not finite."""
     if not 0 < width <= 16384 or not 0 < height <= 16384:
         raise ValueError(f"picture size {width}x{height} out of range")
-    n_draws = len(starts) - 1
+    draws = np.ascontiguousarray(draws, np.int64).reshape(-1, 3)
     if not proj.finite:
-        return local, np.diff(starts)
-    out = np.empty_like(local)
-    counts = np.zeros(n_draws, np.int64)
+        return np.concatenate([indices[f:f + n] for f, n, _ in draws] or [indices[:0]]), draws[:, 1].copy()
+    out = np.empty(int(draws[:, 1].sum()), np.uint32)
+    counts = np.zeros(len(draws), np.int64)
     k = _cull(proj.pt, np.ascontiguousarray(view_proj, np.float64), proj.extent, int(width), int(height),
-              corners, local, starts, out, counts)
+              np.ascontiguousarray(indices, np.uint32), draws, out, counts)
     return out[:k], counts
 
 
 def warm() -> None:
     """Load (or compile, the first time) the kernel: part of a renderer process's set-up."""
     p = Projector(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32))
-    cull(p, np.array([[0], [1], [2]], np.int32), np.array([[0, 1, 2]], np.uint32), np.array([0, 1], np.int64),
-         np.eye(4), 4, 4)
+    cull(p, np.array([0, 1, 2], np.uint32), np.array([[0, 3, 0]]), np.eye(4), 4, 4)

@@ -28,7 +28,8 @@ import numpy as np
 from assetpipe.core.errors import RenderError
 
 from .camera import Camera
-from .cull import CULL_MIN_TRIANGLES, Projector, cull
+from .cull import CULL_MIN_TRIANGLES, Projector
+from .cull import cull as cull_draws
 from .loader import RenderModel, Texture
 from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
@@ -79,10 +80,8 @@ class GpuModel:
     upload_seconds: float = 0.0
     destroyed: bool = field(default=False)
     plain: bool = False  # no texture in any role and white vertex colours: shaded through the PLAIN shaders
-    # culling (renderer/cull.py): per (lod, meshes), the draws' triangles as vertex-buffer corners
-    # (3, T) int32, their stored (local) index rows (T, 3) uint32 and each draw's first triangle;
-    # the culled indices go to ``cull_buffer`` (host-visible, rewritten before each render that culls)
-    cull_sets: dict[Any, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # culling (renderer/cull.py): the kept indices go to ``cull_buffer`` (host-visible, rewritten
+    # before each render that culls)
     cull_buffer: Buffer | None = None
     projector: Projector | None = None
 
@@ -390,7 +389,6 @@ class Renderer:
         for b in (gpu.vertex_buffer, gpu.index_buffer, gpu.material_buffer, gpu.cull_buffer):
             if b is not None:
                 b.destroy()
-        gpu.cull_sets.clear()
         gpu.destroyed = True
 
     def draws(self, gpu: GpuModel, lod: int = 0, meshes: list[int] | None = None) -> list[Draw]:
@@ -423,7 +421,7 @@ class Renderer:
         vk, ctx = self.vk, self.ctx
         silhouette = mode not in ("shaded", "shaded+facing")
         draws = self.draws(gpu, lod, meshes)
-        draws, index_buffer = self._culled(gpu, draws, camera, (lod, None if meshes is None else tuple(meshes)))
+        draws, index_buffer = self._culled(gpu, draws, camera)
         eye = np.asarray(camera.eye, np.float64)
         opaque = [d for d in draws if silhouette or not d.blended]
         blended = sorted((d for d in draws if not silhouette and d.blended),
@@ -513,37 +511,30 @@ class Renderer:
         self.timings["render"] += time.perf_counter() - t0
         return out
 
-    def _culled(self, gpu: GpuModel, draws: list[Draw], camera: Camera, key: Any) -> tuple[list[Draw], Buffer]:
+    def _culled(self, gpu: GpuModel, draws: list[Draw], camera: Camera) -> tuple[list[Draw], Buffer]:
         """``draws`` with only the triangles that can cover a pixel centre of ``camera``'s picture
         (:mod:`renderer.cull`: the same picture, bit for bit), as ranges of ``gpu.cull_buffer``, and
-        the index buffer to bind. A draw list of fewer than ``CULL_MIN_TRIANGLES`` triangles, or of
-        fewer than one a pixel, is drawn whole."""
+        the index buffer to bind. A draw list of fewer than ``CULL_MIN_TRIANGLES`` triangles is drawn
+        whole."""
         total = sum(d.index_count for d in draws) // 3
-        if not self.cull or total < max(CULL_MIN_TRIANGLES, camera.width * camera.height):
+        if not self.cull or total < CULL_MIN_TRIANGLES:
             return draws, gpu.index_buffer
         model = gpu.model
-        sets = gpu.cull_sets.get(key)
-        if sets is None:
-            rows = np.concatenate([np.arange(d.first_index, d.first_index + d.index_count) for d in draws])
-            local = np.ascontiguousarray(model.indices[rows].reshape(-1, 3))
-            counts = np.array([d.index_count // 3 for d in draws], np.int64)
-            base = np.repeat(np.array([d.vertex_offset for d in draws], np.int64), counts)
-            corners = np.ascontiguousarray((local.astype(np.int64) + base[:, None]).T.astype(np.int32))
-            sets = gpu.cull_sets[key] = (corners, local, np.r_[0, np.cumsum(counts)].astype(np.int64))
-        corners, local, starts = sets
         if gpu.projector is None:
             gpu.projector = Projector(model.positions)
-        kept, per_draw = cull(gpu.projector, corners, local, starts, camera.view_proj, camera.width, camera.height)
+        ranges = np.array([(d.first_index, d.index_count, d.vertex_offset) for d in draws], np.int64)
+        kept, per_draw = cull_draws(gpu.projector, model.indices, ranges, camera.view_proj, camera.width,
+                                    camera.height)
         if gpu.cull_buffer is None or gpu.cull_buffer.size < max(kept.nbytes, 4):
             if gpu.cull_buffer is not None:
                 gpu.cull_buffer.destroy()
-            gpu.cull_buffer = self.ctx.create_buffer(max(local.nbytes, 4), self.vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
+            gpu.cull_buffer = self.ctx.create_buffer(max(4 * total * 3, 4), self.vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
         gpu.cull_buffer.write(kept)
         out, first = [], 0
         for d, n in zip(draws, per_draw.tolist()):
             if n:
-                out.append(dataclasses.replace(d, first_index=first, index_count=3 * n))
-            first += 3 * n
+                out.append(dataclasses.replace(d, first_index=first, index_count=n))
+            first += n
         return out, gpu.cull_buffer
 
     def one_pass(self, gpu: GpuModel) -> bool:
