@@ -464,8 +464,9 @@ class Renderer:
             if draws:
                 vk.vkCmdBindVertexBuffers(cmd, 0, 1, [gpu.vertex_buffer.handle], [0])
                 vk.vkCmdBindIndexBuffer(cmd, index_buffer.handle, 0, vk.VK_INDEX_TYPE_UINT32)
-            bound_pipe = bound_set = None
+            bound_pipe = bound_set = pushed = None
             ints = np.zeros(4, np.int32)
+            lean = mode in ("coverage", "facing", "silhouette")  # the lean pipelines (lean.vert/lean.frag)
             for d in opaque + blended:
                 if mode in ("coverage", "facing"):
                     pipe = self._lean[False]
@@ -484,11 +485,17 @@ class Renderer:
                                                0, 1, [dset], 0, None)
                     bound_set = dset
                 code = _MODE_CODE.get(mode, 1 if silhouette else 0)
-                ints[:] = (d.material, d.tex_slot, code, 1 if d.double_sided else 0)
-                data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
-                vk.vkCmdPushConstants(cmd, self.pipeline_layout,
-                                      vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
-                                      0, PUSH_SIZE, vk.ffi.from_buffer(data))
+                # lean.frag reads only the mode and double-sidedness: a draw there pushes constants only
+                # when those change (they persist across draws and pipelines of this one layout)
+                key = (0, 0, code, int(d.double_sided)) if lean else (d.material, d.tex_slot, code,
+                                                                      int(d.double_sided))
+                if key != pushed:
+                    ints[:] = key
+                    data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
+                    vk.vkCmdPushConstants(cmd, self.pipeline_layout,
+                                          vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
+                                          0, PUSH_SIZE, vk.ffi.from_buffer(data))
+                    pushed = key
                 vk.vkCmdDrawIndexed(cmd, d.index_count, 1, d.first_index, d.vertex_offset, 0)
             vk.vkCmdEndRendering(cmd)
             ctx.image_barrier(cmd, color, vk.VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL,
