@@ -35,8 +35,8 @@ from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
 
 TEXTURE_SLOTS = 16
-MATERIAL_FLOATS = 12  # the shader's Material: baseColor, params, roles (three vec4, std430)
-VERTEX_STRIDE = 36  # position (3) + uv (2) + colour (4) float32
+MATERIAL_FLOATS = 16  # the shader's Material: baseColor, params, roles, uvSets (four vec4, std430)
+VERTEX_STRIDE = 44  # position (3) + uv0 (2) + colour (4) + uv1 (2) float32
 PUSH_SIZE = 112     # mat4 + vec4 + vec4 + ivec4
 COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
 DEPTH_FORMAT_NAME = "VK_FORMAT_D32_SFLOAT"
@@ -166,6 +166,8 @@ class Renderer:
                                                  offset=12),
             vk.VkVertexInputAttributeDescription(location=2, binding=0, format=vk.VK_FORMAT_R32G32B32A32_SFLOAT,
                                                  offset=20),
+            vk.VkVertexInputAttributeDescription(location=3, binding=0, format=vk.VK_FORMAT_R32G32_SFLOAT,
+                                                 offset=36),
         ]
         if variant != "full":
             attrs = attrs[:1]
@@ -292,7 +294,8 @@ class Renderer:
         """Upload vertices, indices, materials and textures of ``model``."""
         vk, ctx = self.vk, self.ctx
         t0 = time.perf_counter()
-        verts = np.concatenate([model.positions, model.uvs, model.colors], axis=1).astype(np.float32)
+        uv1 = model.uvs1 if model.uvs1 is not None else np.zeros((len(model.positions), 2), np.float32)
+        verts = np.concatenate([model.positions, model.uvs, model.colors, uv1], axis=1).astype(np.float32)
         vb = ctx.create_buffer(verts.nbytes, vk.VK_BUFFER_USAGE_VERTEX_BUFFER_BIT)
         vb.write(verts)
         ib = ctx.create_buffer(model.indices.nbytes, vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
@@ -338,6 +341,7 @@ class Renderer:
                 mat_rows[i, 7] = 2.0 if two else 1.0
             for k in (2, 3, 4):  # metallic-roughness, occlusion, emissive slots (0: not drawn)
                 mat_rows[i, 6 + k] = slot_of.get(k, 0)
+            mat_rows[i, 12:16] = m.role_uv  # the UV set (0 uv0, 1 uv1) of normal, m-r, occlusion, emissive
         mb.write(mat_rows)
         n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
