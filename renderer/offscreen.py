@@ -308,12 +308,22 @@ class Renderer:
             mat_rows[i, 5] = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}.get(m.alpha_mode, 0)
         mb = ctx.create_buffer(mat_rows.nbytes, vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT)
 
-        images: list[Image] = []
+        images: list[Image] = []  # each uploaded once (see image_key)
         samplers: list[Any] = []
+        pairs: list[tuple[Image, Any]] = []  # (image, sampler) of each combined-image-sampler slot used
+        image_of: dict[tuple, Image] = {}
+        sampler_of: dict[tuple, Any] = {}
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
-        by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
-        uploaded: dict[int, int] = {}  # id(Texture) -> its index in images
+        by_set: list[list[int]] = [[]]  # per descriptor set: indices into pairs, slot 1 onwards
+        uploaded: dict[int, int] = {}  # id(Texture) -> its index in pairs
+
+        def image_key(t: Texture) -> tuple:
+            """The same texels: a KTX2 file (a built model's materials each read theirs), or the same
+            level arrays (the reference's textures, one per material with that material's sampler)."""
+            if t.from_ktx2 and t.name:
+                return ("file", t.name, t.vk_format, len(t.levels))
+            return ("levels", id(t.levels), t.vk_format)
         for i, m in enumerate(model.materials):
             roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
                      m.emissive_texture)
@@ -325,9 +335,15 @@ class Renderer:
                 k = uploaded.get(id(t))
                 if k is None or k not in by_set[-1]:  # the same Texture in two roles: one image
                     if k is None:
-                        images.append(self._upload_texture(t, model.notes))
-                        samplers.append(self._make_sampler(t.sampler, len(t.levels)))
-                        k = uploaded[id(t)] = len(images) - 1
+                        ik, sk = image_key(t), (repr(sorted(t.sampler.items())), len(t.levels))
+                        if ik not in image_of:
+                            image_of[ik] = self._upload_texture(t, model.notes)
+                            images.append(image_of[ik])
+                        if sk not in sampler_of:
+                            sampler_of[sk] = self._make_sampler(t.sampler, len(t.levels))
+                            samplers.append(sampler_of[sk])
+                        pairs.append((image_of[ik], sampler_of[sk]))
+                        k = uploaded[id(t)] = len(pairs) - 1
                     by_set[-1].append(k)
                 placed.append(by_set[-1].index(k) + 1)
             slot_of = dict(zip([k for k, t in enumerate(roles) if t is not None], placed))
@@ -358,8 +374,7 @@ class Renderer:
             infos = []
             for slot in range(TEXTURE_SLOTS):
                 if 0 < slot <= len(by_set[s]):
-                    k = by_set[s][slot - 1]
-                    img, smp = images[k], samplers[k]
+                    img, smp = pairs[by_set[s][slot - 1]]
                 else:
                     img, smp = self.white, self.white_sampler
                 infos.append(vk.VkDescriptorImageInfo(sampler=smp, imageView=img.view,
