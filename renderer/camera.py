@@ -9,6 +9,7 @@ GPU applies (viewport included), so silhouettes can be compared with CPU project
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -29,15 +30,17 @@ class Camera:
     width: int
     height: int
 
-    @property
+    # computed once per camera (the fields are frozen): a render reads them a few times, the
+    # silhouette check once per projection
+    @cached_property
     def view(self) -> np.ndarray:
         return look_at(self.eye, self.target, self.up)
 
-    @property
+    @cached_property
     def proj(self) -> np.ndarray:
         return perspective(self.fov_y_deg, self.width / self.height, self.near, self.far)
 
-    @property
+    @cached_property
     def view_proj(self) -> np.ndarray:
         return self.proj @ self.view
 

@@ -8,8 +8,9 @@ checked while loading, so a broken build is reported by name instead of drawing 
 * every ``materialId`` against ``ID-mat.json`` and the sidecar,
 * the vertex layout's attributes (position required; uv0 and a colour optional).
 
-Textures (base colour, and normal, metallic-roughness, occlusion and emissive when they use the base
-colour's UV set): each KTX2 is uploaded with all its levels exactly as stored (no
+Textures (base colour, and normal, metallic-roughness, occlusion and emissive, each on the layout's
+uv0 or, for a role on the other UV set, its uv1; a role whose UV set the layout does not carry is
+not drawn, and a note says which and why): each KTX2 is uploaded with all its levels exactly as stored (no
 mip generation here), block-compressed formats (BC7, ETC2, ...) as blocks; a device that cannot
 sample a block format gets the levels decoded on the CPU, and a note says so. A material without a KTX2 falls back to its ``texturePath`` PNG/JPEG
 decoded with Pillow as level 0 only, and a note says so.
@@ -90,6 +91,9 @@ class Material:
     metallic_roughness_texture: Texture | None = None  # UNORM: G roughness, B metallic (glTF)
     occlusion_texture: Texture | None = None           # UNORM: R occlusion
     emissive_texture: Texture | None = None            # sRGB emissive colour
+    # the vertex UV slot each of (normal, metallic-roughness, occlusion, emissive) samples: 0 the
+    # layout's uv0 (the base colour's set), 1 its uv1 (the other set: docs/FORMAT.md)
+    role_uv: tuple[int, int, int, int] = (0, 0, 0, 0)
 
     @property
     def blended(self) -> bool:
@@ -144,6 +148,7 @@ class RenderModel:
     # a recentred model's sidecar positionOffset (float64), already added to ``positions``,
     # the bounds and the centres: the model is drawn in its source's frame, like the source
     position_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    uvs1: np.ndarray | None = None  # (N, 2) the layout's uv1 (the second UV set), when it has one
 
     @property
     def lod_count(self) -> int:
@@ -177,6 +182,13 @@ def material_list_path(model_json: Path) -> Path:
 
 def decode_vertices(raw: bytes, layout: dict[str, Any], where: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions (N,3), uvs (N,2), colours (N,4) as float32 from interleaved ``raw``."""
+    pos, uvs, colors, _ = decode_vertex_arrays(raw, layout, where)
+    return pos, uvs, colors
+
+
+def decode_vertex_arrays(raw: bytes, layout: dict[str, Any], where: Path,
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """As :func:`decode_vertices`, and the layout's ``uv1`` (N,2) float32, or None without one."""
     stride = int(layout.get("stride", 0))
     if stride <= 0:
         raise AssetError(where, f"vertexLayout stride {stride} is not positive")
@@ -212,7 +224,8 @@ def decode_vertices(raw: bytes, layout: dict[str, Any], where: Path) -> tuple[np
     if col_key:
         c = found[col_key]
         colors[:, : min(4, c.shape[1])] = c[:, :4]
-    return pos, np.ascontiguousarray(uvs, np.float32), colors
+    uv1 = np.ascontiguousarray(found["uv1"][:, :2], np.float32) if "uv1" in found else None
+    return pos, np.ascontiguousarray(uvs, np.float32), colors, uv1
 
 
 def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_path: str,
@@ -265,35 +278,50 @@ DRAWN_ROLES = {"normal": VK_FORMAT_R8G8B8A8_UNORM, "metallicRoughness": VK_FORMA
                "occlusion": VK_FORMAT_R8G8B8A8_UNORM, "emissive": VK_FORMAT_R8G8B8A8_SRGB}
 
 
+def role_uv_slot(side_mat: dict[str, Any], role: str, layout_names: set[str]) -> tuple[int | None, str]:
+    """(the layout UV slot ``role``'s texture samples: 0 uv0, 1 uv1, None when the build does not carry
+    its UV set; why not). The build writes the base colour's UV set into uv0 and the other set
+    into uv1 (docs/FORMAT.md), so a role on the base colour's ``texCoord`` samples uv0, a role on
+    the other of TEXCOORD_0/1 samples uv1, which only a layout listing ``uv1`` carries."""
+    textures = side_mat.get("textures") or {}
+    tex = textures.get(role) or {}
+    base_set = int((textures.get("baseColor") or {}).get("texCoord", 0) or 0)
+    own = int(tex.get("texCoord", 0) or 0)
+    if own == base_set:
+        return 0, ""
+    if {own, base_set} != {0, 1}:
+        return None, f"it samples TEXCOORD_{own}, and the build carries TEXCOORD_0 and TEXCOORD_1 only"
+    if "uv1" not in layout_names:
+        return None, (f"it samples TEXCOORD_{own}, which the build's vertex layout does not carry (no uv1 "
+                      "attribute; build with --layout ...,uv1 to carry it)")
+    return 1, ""
+
+
 def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: str,
-                       notes: list[str], loaded: dict[tuple, Texture | None] | None = None) -> Texture | None:
-    """The material's texture in ``role`` (its KTX2, else level 0 of its image), when it samples
-    the UV set the base colour does (the renderer draws one UV set). ``loaded``: the model's
-    textures read so far, by file and sampler (a packed occlusion-roughness-metallic KTX2 that two
-    roles name is read and uploaded once)."""
+                       notes: list[str], loaded: dict[tuple, Texture | None] | None = None,
+                       layout_names: set[str] | None = None) -> tuple[Texture | None, int]:
+    """(the material's texture in ``role`` (its KTX2, else level 0 of its image), the UV slot it
+    samples (:func:`role_uv_slot`)); no texture when the build does not carry its UV set (a note
+    says which role and why). ``loaded``: the model's textures read so far, by file and sampler (a
+    packed occlusion-roughness-metallic KTX2 that two roles name is read and uploaded once)."""
     textures = side_mat.get("textures") or {}
     tex = textures.get(role)
     if not tex:
-        return None
-    base = textures.get("baseColor")
-    if int((base or {}).get("texCoord", 0)) != int(tex.get("texCoord", 0)):
-        notes.append(f"material {mat_id}: the {role} texture uses another UV set than the base colour: not drawn")
-        return None
+        return None, 0
+    slot, why = role_uv_slot(side_mat, role, layout_names if layout_names is not None else {"uv0"})
+    if slot is None:
+        notes.append(f"material {mat_id}: the {role} texture is not drawn: {why}")
+        return None, 0
     key = (tex.get("ktx2") or tex.get("path"), repr(sorted((tex.get("sampler") or {}).items())),
            DRAWN_ROLES[role])
     if loaded is not None and key in loaded:
-        return loaded[key]
+        return loaded[key], slot
     out = _load_texture(root, mat_id, tex, "", notes)
     if out is not None and not out.from_ktx2:
         out.vk_format = DRAWN_ROLES[role]
     if loaded is not None:
         loaded[key] = out
-    return out
-
-
-def _load_normal_texture(root: Path, mat_id: str, side_mat: dict[str, Any], notes: list[str]) -> Texture | None:
-    """The material's normal map (see :func:`_load_role_texture`)."""
-    return _load_role_texture(root, mat_id, side_mat, "normal", notes)
+    return out, slot
 
 
 def load_built_model(model_json: Path, load_textures: bool = True) -> RenderModel:
@@ -324,7 +352,8 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
     vtx_raw = vtx_path.read_bytes()
     if len(idx_raw) % 4:
         raise InvalidGeometryError(idx_path, f"size {len(idx_raw)} is not a multiple of 4 (truncated?)")
-    positions, uvs, colors = decode_vertices(vtx_raw, layout, vtx_path)
+    positions, uvs, colors, uvs1 = decode_vertex_arrays(vtx_raw, layout, vtx_path)
+    layout_names = {str(a.get("name", "")).lower() for a in layout.get("attributes", [])}
     if not np.isfinite(positions).all():
         raise InvalidGeometryError(vtx_path, "non-finite vertex positions")
     indices = np.frombuffer(idx_raw, "<u4").astype(np.uint32)
@@ -341,17 +370,18 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
         color = m.get("color") or sm.get("baseColorFactor") or [1, 1, 1, 1]
         tex = (sm.get("textures") or {}).get("baseColor")
         texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes) if load_textures else None
-        normal = _load_normal_texture(root, mid, sm, notes) if load_textures else None
-        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded) if load_textures else None
-                 for r in ("metallicRoughness", "occlusion", "emissive")}
+        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded if r != "normal" else None, layout_names)
+                 if load_textures else (None, 0) for r in ("normal", "metallicRoughness", "occlusion", "emissive")}
         mat_index[mid] = len(materials)
         materials.append(Material(id=mid, base_color=tuple(float(c) for c in color[:4]),  # type: ignore[arg-type]
                                   alpha_mode=str(sm.get("alphaMode", "OPAQUE")),
                                   alpha_cutoff=float(sm.get("alphaCutoff", 0.5)),
                                   double_sided=bool(sm.get("doubleSided", False)), texture=texture,
-                                  normal_texture=normal,
-                                  metallic_roughness_texture=roles["metallicRoughness"],
-                                  occlusion_texture=roles["occlusion"], emissive_texture=roles["emissive"]))
+                                  normal_texture=roles["normal"][0],
+                                  metallic_roughness_texture=roles["metallicRoughness"][0],
+                                  occlusion_texture=roles["occlusion"][0], emissive_texture=roles["emissive"][0],
+                                  role_uv=tuple(roles[r][1] for r in ("normal", "metallicRoughness", "occlusion",  # type: ignore[arg-type]
+                                                                      "emissive"))))
 
     side_meshes = {m.get("id"): m for m in side.get("meshes", []) if isinstance(m, dict)}
     meshes: list[Mesh] = []
@@ -425,4 +455,5 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
             m.center = m.center + offset
     return RenderModel(id=str(seed.get("id", model_json.stem)), positions=positions, uvs=uvs, colors=colors,
                        indices=indices, meshes=meshes, materials=materials, bounds_min=bmin, bounds_max=bmax,
-                       center=center, radius=radius, notes=notes, sidecar=side, root=root, position_offset=offset)
+                       center=center, radius=radius, notes=notes, sidecar=side, root=root, position_offset=offset,
+                       uvs1=uvs1)

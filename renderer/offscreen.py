@@ -16,6 +16,7 @@ readback to numpy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -27,13 +28,15 @@ import numpy as np
 from assetpipe.core.errors import RenderError
 
 from .camera import Camera
+from .cull import CULL_MIN_TRIANGLES, Projector
+from .cull import cull as cull_draws
 from .loader import RenderModel, Texture
 from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
 
 TEXTURE_SLOTS = 16
-MATERIAL_FLOATS = 12  # the shader's Material: baseColor, params, roles (three vec4, std430)
-VERTEX_STRIDE = 36  # position (3) + uv (2) + colour (4) float32
+MATERIAL_FLOATS = 16  # the shader's Material: baseColor, params, roles, uvSets (four vec4, std430)
+VERTEX_STRIDE = 44  # position (3) + uv0 (2) + colour (4) + uv1 (2) float32
 PUSH_SIZE = 112     # mat4 + vec4 + vec4 + ivec4
 COLOR_FORMAT_NAME = "VK_FORMAT_R8G8B8A8_SRGB"
 DEPTH_FORMAT_NAME = "VK_FORMAT_D32_SFLOAT"
@@ -77,6 +80,10 @@ class GpuModel:
     upload_seconds: float = 0.0
     destroyed: bool = field(default=False)
     plain: bool = False  # no texture in any role and white vertex colours: shaded through the PLAIN shaders
+    # culling (renderer/cull.py): the kept indices go to ``cull_buffer`` (host-visible, rewritten
+    # before each render that culls)
+    cull_buffer: Buffer | None = None
+    projector: Projector | None = None
 
 
 class Renderer:
@@ -93,6 +100,7 @@ class Renderer:
         self.depth: Image | None = None
         self.readback: Buffer | None = None
         self.timings: dict[str, float] = {"compile": 0.0, "upload": 0.0, "render": 0.0}
+        self.cull = True  # leave out triangles that cover no pixel centre (renderer/cull.py; same pictures)
         t0 = time.perf_counter()
         self._vert = self._module(compile_glsl(shader_path("mesh.vert"), shader_cache))
         self._frag = self._module(compile_glsl(shader_path("mesh.frag"), shader_cache))
@@ -158,6 +166,8 @@ class Renderer:
                                                  offset=12),
             vk.VkVertexInputAttributeDescription(location=2, binding=0, format=vk.VK_FORMAT_R32G32B32A32_SFLOAT,
                                                  offset=20),
+            vk.VkVertexInputAttributeDescription(location=3, binding=0, format=vk.VK_FORMAT_R32G32_SFLOAT,
+                                                 offset=36),
         ]
         if variant != "full":
             attrs = attrs[:1]
@@ -284,7 +294,8 @@ class Renderer:
         """Upload vertices, indices, materials and textures of ``model``."""
         vk, ctx = self.vk, self.ctx
         t0 = time.perf_counter()
-        verts = np.concatenate([model.positions, model.uvs, model.colors], axis=1).astype(np.float32)
+        uv1 = model.uvs1 if model.uvs1 is not None else np.zeros((len(model.positions), 2), np.float32)
+        verts = np.concatenate([model.positions, model.uvs, model.colors, uv1], axis=1).astype(np.float32)
         vb = ctx.create_buffer(verts.nbytes, vk.VK_BUFFER_USAGE_VERTEX_BUFFER_BIT)
         vb.write(verts)
         ib = ctx.create_buffer(model.indices.nbytes, vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
@@ -297,12 +308,22 @@ class Renderer:
             mat_rows[i, 5] = {"OPAQUE": 0, "MASK": 1, "BLEND": 2}.get(m.alpha_mode, 0)
         mb = ctx.create_buffer(mat_rows.nbytes, vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT)
 
-        images: list[Image] = []
+        images: list[Image] = []  # each uploaded once (see image_key)
         samplers: list[Any] = []
+        pairs: list[tuple[Image, Any]] = []  # (image, sampler) of each combined-image-sampler slot used
+        image_of: dict[tuple, Image] = {}
+        sampler_of: dict[tuple, Any] = {}
         slots: list[tuple[int, int]] = []
         per_set = TEXTURE_SLOTS - 1  # slot 0 of every set is the white texture
-        by_set: list[list[int]] = [[]]  # per descriptor set: indices into images, slot 1 onwards
-        uploaded: dict[int, int] = {}  # id(Texture) -> its index in images
+        by_set: list[list[int]] = [[]]  # per descriptor set: indices into pairs, slot 1 onwards
+        uploaded: dict[int, int] = {}  # id(Texture) -> its index in pairs
+
+        def image_key(t: Texture) -> tuple:
+            """The same texels: a KTX2 file (a built model's materials each read theirs), or the same
+            level arrays (the reference's textures, one per material with that material's sampler)."""
+            if t.from_ktx2 and t.name:
+                return ("file", t.name, t.vk_format, len(t.levels))
+            return ("levels", id(t.levels), t.vk_format)
         for i, m in enumerate(model.materials):
             roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
                      m.emissive_texture)
@@ -314,9 +335,15 @@ class Renderer:
                 k = uploaded.get(id(t))
                 if k is None or k not in by_set[-1]:  # the same Texture in two roles: one image
                     if k is None:
-                        images.append(self._upload_texture(t, model.notes))
-                        samplers.append(self._make_sampler(t.sampler, len(t.levels)))
-                        k = uploaded[id(t)] = len(images) - 1
+                        ik, sk = image_key(t), (repr(sorted(t.sampler.items())), len(t.levels))
+                        if ik not in image_of:
+                            image_of[ik] = self._upload_texture(t, model.notes)
+                            images.append(image_of[ik])
+                        if sk not in sampler_of:
+                            sampler_of[sk] = self._make_sampler(t.sampler, len(t.levels))
+                            samplers.append(sampler_of[sk])
+                        pairs.append((image_of[ik], sampler_of[sk]))
+                        k = uploaded[id(t)] = len(pairs) - 1
                     by_set[-1].append(k)
                 placed.append(by_set[-1].index(k) + 1)
             slot_of = dict(zip([k for k, t in enumerate(roles) if t is not None], placed))
@@ -330,6 +357,7 @@ class Renderer:
                 mat_rows[i, 7] = 2.0 if two else 1.0
             for k in (2, 3, 4):  # metallic-roughness, occlusion, emissive slots (0: not drawn)
                 mat_rows[i, 6 + k] = slot_of.get(k, 0)
+            mat_rows[i, 12:16] = m.role_uv  # the UV set (0 uv0, 1 uv1) of normal, m-r, occlusion, emissive
         mb.write(mat_rows)
         n_sets = len(by_set)
         pool = vk.vkCreateDescriptorPool(ctx.device, vk.VkDescriptorPoolCreateInfo(
@@ -346,8 +374,7 @@ class Renderer:
             infos = []
             for slot in range(TEXTURE_SLOTS):
                 if 0 < slot <= len(by_set[s]):
-                    k = by_set[s][slot - 1]
-                    img, smp = images[k], samplers[k]
+                    img, smp = pairs[by_set[s][slot - 1]]
                 else:
                     img, smp = self.white, self.white_sampler
                 infos.append(vk.VkDescriptorImageInfo(sampler=smp, imageView=img.view,
@@ -378,8 +405,9 @@ class Renderer:
             vk.vkDestroySampler(self.ctx.device, s, None)
         for img in gpu.images:
             img.destroy()
-        for b in (gpu.vertex_buffer, gpu.index_buffer, gpu.material_buffer):
-            b.destroy()
+        for b in (gpu.vertex_buffer, gpu.index_buffer, gpu.material_buffer, gpu.cull_buffer):
+            if b is not None:
+                b.destroy()
         gpu.destroyed = True
 
     def draws(self, gpu: GpuModel, lod: int = 0, meshes: list[int] | None = None) -> list[Draw]:
@@ -412,6 +440,7 @@ class Renderer:
         vk, ctx = self.vk, self.ctx
         silhouette = mode not in ("shaded", "shaded+facing")
         draws = self.draws(gpu, lod, meshes)
+        draws, index_buffer = self._culled(gpu, draws, camera)
         eye = np.asarray(camera.eye, np.float64)
         opaque = [d for d in draws if silhouette or not d.blended]
         blended = sorted((d for d in draws if not silhouette and d.blended),
@@ -453,9 +482,10 @@ class Renderer:
             vk.vkCmdSetScissor(cmd, 0, 1, [area])
             if draws:
                 vk.vkCmdBindVertexBuffers(cmd, 0, 1, [gpu.vertex_buffer.handle], [0])
-                vk.vkCmdBindIndexBuffer(cmd, gpu.index_buffer.handle, 0, vk.VK_INDEX_TYPE_UINT32)
-            bound_pipe = bound_set = None
+                vk.vkCmdBindIndexBuffer(cmd, index_buffer.handle, 0, vk.VK_INDEX_TYPE_UINT32)
+            bound_pipe = bound_set = pushed = None
             ints = np.zeros(4, np.int32)
+            lean = mode in ("coverage", "facing", "silhouette")  # the lean pipelines (lean.vert/lean.frag)
             for d in opaque + blended:
                 if mode in ("coverage", "facing"):
                     pipe = self._lean[False]
@@ -474,11 +504,17 @@ class Renderer:
                                                0, 1, [dset], 0, None)
                     bound_set = dset
                 code = _MODE_CODE.get(mode, 1 if silhouette else 0)
-                ints[:] = (d.material, d.tex_slot, code, 1 if d.double_sided else 0)
-                data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
-                vk.vkCmdPushConstants(cmd, self.pipeline_layout,
-                                      vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
-                                      0, PUSH_SIZE, vk.ffi.from_buffer(data))
+                # lean.frag reads only the mode and double-sidedness: a draw there pushes constants only
+                # when those change (they persist across draws and pipelines of this one layout)
+                key = (0, 0, code, int(d.double_sided)) if lean else (d.material, d.tex_slot, code,
+                                                                      int(d.double_sided))
+                if key != pushed:
+                    ints[:] = key
+                    data = np.concatenate([floats.view(np.uint8), ints.view(np.uint8)])
+                    vk.vkCmdPushConstants(cmd, self.pipeline_layout,
+                                          vk.VK_SHADER_STAGE_VERTEX_BIT | vk.VK_SHADER_STAGE_FRAGMENT_BIT,
+                                          0, PUSH_SIZE, vk.ffi.from_buffer(data))
+                    pushed = key
                 vk.vkCmdDrawIndexed(cmd, d.index_count, 1, d.first_index, d.vertex_offset, 0)
             vk.vkCmdEndRendering(cmd)
             ctx.image_barrier(cmd, color, vk.VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL,
@@ -500,6 +536,32 @@ class Renderer:
         out = readback.read(w * h * 4).reshape(h, w, 4)
         self.timings["render"] += time.perf_counter() - t0
         return out
+
+    def _culled(self, gpu: GpuModel, draws: list[Draw], camera: Camera) -> tuple[list[Draw], Buffer]:
+        """``draws`` with only the triangles that can cover a pixel centre of ``camera``'s picture
+        (:mod:`renderer.cull`: the same picture, bit for bit), as ranges of ``gpu.cull_buffer``, and
+        the index buffer to bind. A draw list of fewer than ``CULL_MIN_TRIANGLES`` triangles is drawn
+        whole."""
+        total = sum(d.index_count for d in draws) // 3
+        if not self.cull or total < CULL_MIN_TRIANGLES:
+            return draws, gpu.index_buffer
+        model = gpu.model
+        if gpu.projector is None:
+            gpu.projector = Projector(model.positions)
+        ranges = np.array([(d.first_index, d.index_count, d.vertex_offset) for d in draws], np.int64)
+        kept, per_draw = cull_draws(gpu.projector, model.indices, ranges, camera.view_proj, camera.width,
+                                    camera.height)
+        if gpu.cull_buffer is None or gpu.cull_buffer.size < max(kept.nbytes, 4):
+            if gpu.cull_buffer is not None:
+                gpu.cull_buffer.destroy()
+            gpu.cull_buffer = self.ctx.create_buffer(max(4 * total * 3, 4), self.vk.VK_BUFFER_USAGE_INDEX_BUFFER_BIT)
+        gpu.cull_buffer.write(kept)
+        out, first = [], 0
+        for d, n in zip(draws, per_draw.tolist()):
+            if n:
+                out.append(dataclasses.replace(d, first_index=first, index_count=n))
+            first += n
+        return out, gpu.cull_buffer
 
     def one_pass(self, gpu: GpuModel) -> bool:
         """Whether :meth:`render_pair` draws ``gpu`` in one pass: every material OPAQUE (no MASK

@@ -39,12 +39,14 @@ def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
 def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
                  decoded: dict[str, Any] | None = None, skip_roles: set[str] | None = None,
                  sampler_of: dict[str, dict[str, dict[str, Any]]] | None = None,
+                 uv1_roles: set[str] | None = None,
                  ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
     """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry.
-    Every texture role trimesh reads is drawn (on TEXCOORD_0, the only UV set trimesh reads) but
-    those in ``skip_roles`` (a source material samples them from another UV set), each with a mip
-    chain of its own and, when ``sampler_of`` names the material (glTF, unique material names), the
-    glTF sampler of that role (wrap modes and filters); else trilinear, repeating."""
+    Every texture role trimesh reads is drawn (on TEXCOORD_0, the only UV set trimesh reads; those
+    in ``uv1_roles`` on TEXCOORD_1, which the reference reads itself: :func:`_second_uvs`) but those
+    in ``skip_roles`` (a source material samples them from a UV set the reference does not draw),
+    each with a mip chain of its own and, when ``sampler_of`` names the material (glTF, unique
+    material names), the glTF sampler of that role (wrap modes and filters); else trilinear, repeating."""
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
     n = len(geom.vertices)
@@ -120,12 +122,15 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
     def attr(a: str) -> Any:
         return getattr(mat, a, None) if mat is not None else None
 
+    on_uv1 = uv1_roles or set()
     return (Material(id=name, base_color=factor, alpha_mode=alpha_mode, alpha_cutoff=cutoff,  # type: ignore[arg-type]
                      double_sided=double_sided, texture=role_texture(image, "baseColor"),
                      normal_texture=role_texture(attr("normalTexture"), "normal"),
                      metallic_roughness_texture=role_texture(attr("metallicRoughnessTexture"), "metallicRoughness"),
                      occlusion_texture=role_texture(attr("occlusionTexture"), "occlusion"),
-                     emissive_texture=role_texture(attr("emissiveTexture"), "emissive")), uv, colors)
+                     emissive_texture=role_texture(attr("emissiveTexture"), "emissive"),
+                     role_uv=tuple(int(r in on_uv1) for r in ("normal", "metallicRoughness", "occlusion",  # type: ignore[arg-type]
+                                                              "emissive"))), uv, colors)
 
 
 def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
@@ -174,11 +179,14 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
     materials: list[Material] = [Material(id="flat")] if flat else []
     mat_cache: dict[str, tuple[int, Any, Any]] = {}
     image_cache: dict[int, Texture] = {}
-    skip = other_uv_roles(path)
+    on_uv1 = second_uv_roles(path)
+    skip = other_uv_roles(path) - on_uv1
     samplers = role_samplers(path)
+    uvs1: list[np.ndarray] = []  # per vertex: TEXCOORD_1 (the reference's own reading), zeros without
     if skip:
-        notes.append(f"the source samples {sorted(skip)} from another UV set than TEXCOORD_0 (trimesh reads "
-                     "TEXCOORD_0 only): not drawn")
+        notes.append(f"the source samples {sorted(skip)} from a UV set other than TEXCOORD_0 (trimesh reads "
+                     "TEXCOORD_0 only) and TEXCOORD_1 (read by the reference where every material samples the "
+                     "role there with the base colour on TEXCOORD_0): not drawn")
     base = first = 0
     for k, (transform, gname, g) in enumerate(instances):
         v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]
@@ -191,7 +199,7 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         elif gname in mat_cache:
             mat_index, uv, col = mat_cache[gname]
         else:
-            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded, skip, samplers)
+            mat, uv, col = _material_of(g, f"source-{k}", notes, image_cache, decoded, skip, samplers, on_uv1)
             mat_index = len(materials)
             materials.append(mat)
             mat_cache[gname] = (mat_index, uv, col)
@@ -204,6 +212,9 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         else:
             ref_uvs.append(uvs[-1])
         ref_mask.append(np.full(n, ref is not None or uv is not None))
+        uv1 = (getattr(g, "vertex_attributes", None) or {}).get(SECOND_UV)
+        uvs1.append(np.asarray(uv1, np.float32).reshape(n, -1)[:, :2] if uv1 is not None and len(uv1) == n
+                    else np.zeros((n, 2), np.float32))
         colors.append(col if col is not None else np.ones((n, 4), np.float32))
         indices.append(f.astype(np.uint32).reshape(-1))
         center = (v.min(0) + v.max(0)) / 2
@@ -220,6 +231,7 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
                        indices=np.concatenate(indices).astype(np.uint32), meshes=meshes, materials=materials,
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent,
+                       uvs1=np.concatenate(uvs1) if on_uv1 else None,
                        sidecar={"undrawnRoles": sorted(skip),
                                 "referenceUvs": np.concatenate(ref_uvs) if from_gltf else None,
                                 "referenceUvMask": np.concatenate(ref_mask) if from_gltf else None, "sparseApplied": diffuse is not None and any(
@@ -247,6 +259,34 @@ def other_uv_roles(path: Path) -> set[str]:
                 if isinstance(node, dict) and int(node.get("texCoord", 0) or 0) != 0:
                     out.add(role)
     return out
+
+
+def _role_tex_coords(doc: dict[str, Any] | None) -> dict[str, set[tuple[int, int]]]:
+    """Per role (not the base colour), the (role texCoord, base colour texCoord) pairs the
+    document's materials use."""
+    out: dict[str, set[tuple[int, int]]] = {}
+    for mat in (doc or {}).get("materials") or []:
+        infos = {}
+        for role, paths in GLTF_ROLE_PATHS.items():
+            for keys in paths:
+                node: Any = mat
+                for k in keys:
+                    node = node.get(k) if isinstance(node, dict) else None
+                if isinstance(node, dict):
+                    infos[role] = node
+                    break
+        base = int((infos.get("baseColor") or {}).get("texCoord", 0) or 0)
+        for role, info in infos.items():
+            if role != "baseColor":
+                out.setdefault(role, set()).add((int(info.get("texCoord", 0) or 0), base))
+    return out
+
+
+def second_uv_roles(path: Path) -> set[str]:
+    """The roles the reference draws from TEXCOORD_1, which it reads itself (:func:`_second_uvs`):
+    those every material of the glTF at ``path`` samples from TEXCOORD_1 while its base colour is
+    on TEXCOORD_0 (what the build's layout stores in ``uv1``)."""
+    return {role for role, pairs in _role_tex_coords(_gltf_json(path)).items() if pairs == {(1, 0)}}
 
 
 def _backslash_resolver(folder: Path) -> Any:
@@ -359,6 +399,27 @@ def _densify_sparse(doc: dict[str, Any], data: _DocData) -> bool:
 
 
 REFERENCE_UV = "_REF_UV"  # trimesh keeps attributes named with a leading underscore as vertex attributes
+SECOND_UV = "_REF_UV1"  # TEXCOORD_1, for the roles of second_uv_roles (trimesh reads TEXCOORD_0 only)
+
+
+def _second_uvs(doc: dict[str, Any], data: _DocData) -> bool:
+    """Give every primitive with a ``TEXCOORD_1`` a ``_REF_UV1`` attribute holding it (as stored:
+    glTF's top-left origin), when some role is drawn from that set (:func:`second_uv_roles`).
+    True when something was added."""
+    if not any(pairs == {(1, 0)} for pairs in _role_tex_coords(doc).values()):
+        return False
+    changed = False
+    for mesh in doc.get("meshes") or []:
+        for prim in (mesh or {}).get("primitives") or []:
+            acc = (prim.get("attributes") or {}).get("TEXCOORD_1")
+            if acc is None:
+                continue
+            uv = data.accessor(acc)[:, :2]
+            doc["accessors"].append({"bufferView": data.append(np.ascontiguousarray(uv, "<f4")), "byteOffset": 0,
+                                     "componentType": 5126, "count": len(uv), "type": "VEC2"})
+            prim["attributes"][SECOND_UV] = len(doc["accessors"]) - 1
+            changed = True
+    return changed
 
 
 def _reference_uvs(doc: dict[str, Any], data: _DocData) -> bool:
@@ -418,6 +479,7 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     data = _DocData(doc, path)
     sparse = _densify_sparse(doc, data)
     ref_uv = _reference_uvs(doc, data)
+    ref_uv = _second_uvs(doc, data) or ref_uv
     data.finish()
     if not (sparse or ref_uv) and "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
         return None

@@ -70,6 +70,9 @@ def _serve() -> int:
                                            shader_cache=Path(opts.shader_cache) if opts.shader_cache else None)
                 import PIL.Image  # noqa: F401,PLC0415 - warm imports are part of set-up
                 import trimesh  # noqa: F401,PLC0415
+                from .cull import warm  # noqa: PLC0415 - the culling kernel (numba), loaded once
+
+                warm()
                 setup = time.perf_counter() - t0
                 proto.write(json.dumps({"ready": True, "setup": setup}) + "\n")
             if req.get("cmd") == "ping":  # a warm-up: the set-up is reported here, charged to no asset

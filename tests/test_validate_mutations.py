@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -185,3 +186,51 @@ def test_flipped_v_on_another_uv_set_or_through_a_transform_is_caught(built: Pat
     MUTATIONS["flipped V"][0](tmp_path / "out" / f"{model}.json")
     uvs = validate_model(tmp_path / "out" / f"{model}.json", OPTS, isolate=False).check("uvs")
     assert uvs.status == "fail" and "flipped or shifted UVs" in uvs.messages[0], uvs.messages
+
+
+@pytest.fixture(scope="module")
+def built_uv1(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The pbr kind (occlusion on TEXCOORD_1) built with a layout that carries the second UV set."""
+    root = tmp_path_factory.mktemp("validate-uv1")
+    write_assets(root / "src", ("pbr",))
+    res = CliRunner().invoke(main, ["build", str(root / "src"), "-o", str(root / "out"), "--cache",
+                                    str(root / "cache"), "--layout", "position,uv0,uv1", "-q"],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    return root
+
+
+def test_a_role_on_the_second_uv_set_is_drawn_from_uv1(built_uv1: Path, tmp_path: Path) -> None:
+    """With ``uv1`` in the layout the occlusion on TEXCOORD_1 is drawn from it, by the build and by
+    the reference (which reads TEXCOORD_1 itself): the good build passes, and a wrong occlusion
+    texture fails ``source`` (the shaded picture) as well as ``roles``."""
+    from assetpipe.renderer.loader import load_built_model
+    from assetpipe.renderer.source_model import load_source_model
+
+    model = built_uv1 / "out" / "pbr.json"
+    built = load_built_model(model)
+    assert built.uvs1 is not None and built.materials[0].occlusion_texture is not None
+    assert built.materials[0].role_uv == (0, 0, 1, 0)  # normal, metallic-roughness, occlusion, emissive
+    src = load_source_model(built_uv1 / "src" / "pbr.glb")
+    assert src.materials[0].occlusion_texture is not None and src.materials[0].role_uv == (0, 0, 1, 0)
+    np.testing.assert_allclose(src.uvs1.min(0), [0.25, 0.25], atol=1e-6)  # the fixture's uv1 = uv0 / 2 + 1/4
+    good = validate_model(model, OPTS, isolate=False)
+    assert good.passed, good.failures()
+    assert good.check("source").measured["colorDiff"] <= good.check("source").tolerance["colorDiff"]
+    shutil.copytree(built_uv1 / "out", tmp_path / "out")
+    MUTATIONS["wrong occlusion (consistent)"][0](tmp_path / "out" / "pbr.json")
+    r = validate_model(tmp_path / "out" / "pbr.json", OPTS, isolate=False)
+    s = r.check("source")
+    assert s.status == "fail" and any("shaded colours differ" in m for m in s.messages), (s.figures, s.messages)
+    assert r.check("roles").status == "fail"
+
+
+def test_a_role_on_a_uv_set_the_layout_lacks_is_named(built: Path) -> None:
+    """The default layout (position, uv0) does not carry TEXCOORD_1: the validator says which role
+    it cannot draw and why, and draws it on neither side (no false alarm)."""
+    r = validate_model(built / "out" / "pbr.json", OPTS, isolate=False)
+    assert r.passed, r.failures()
+    assert any("the occlusion texture is not drawn: it samples TEXCOORD_1, which the build's vertex layout "
+               "does not carry" in n for n in r.notes), r.notes
+    assert any("['occlusion'] on TEXCOORD_1 drawn on neither side" in c
+               for c in r.check("source").figures.get("caveats", [])), r.check("source").figures

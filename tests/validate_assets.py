@@ -123,7 +123,9 @@ def make_asset(kind: str) -> GltfBuilder:
         pbr["baseColorTexture"] = {"index": tex(base_texture())}
         pbr["metallicRoughnessTexture"] = {"index": tex(data_texture(seed=1))}
         mat["normalTexture"] = {"index": tex(normal_texture())}
-        mat["occlusionTexture"] = {"index": tex(data_texture(seed=0)), "texCoord": 1}
+        # on TEXCOORD_1 (drawn from the layout's uv1 when the build carries it); a dark band that a
+        # half turn moves (the R channel of data_texture(seed=0) is uniform: turned, it looked the same)
+        mat["occlusionTexture"] = {"index": tex(orm_texture()), "texCoord": 1}
         mat["emissiveTexture"] = {"index": tex(emissive_texture())}
         mat["emissiveFactor"] = [1.0, 1.0, 1.0]
     elif kind == "specgloss":

@@ -20,10 +20,22 @@ def boundary_length(model, lod: int) -> float:
 def mesh_diagonals(model) -> np.ndarray:
     """(meshes,) the diagonal of each mesh's box (its LOD0 vertices; 0 for an empty mesh)."""
     out = np.zeros(len(model.meshes))
-    for i, mesh in enumerate(model.meshes):
-        if mesh.vertex_count:
-            pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
-            out[i] = float(np.linalg.norm(pos.max(0).astype(np.float64) - pos.min(0)))
+    live = [i for i, mesh in enumerate(model.meshes) if mesh.vertex_count]
+    if live:  # per-mesh boxes from one reduceat over the meshes' (disjoint, contiguous) vertex ranges
+        order = sorted(live, key=lambda i: model.meshes[i].vertex_base)
+        starts = np.array([model.meshes[i].vertex_base for i in order])
+        ends = starts + np.array([model.meshes[i].vertex_count for i in order])
+        if (starts[1:] >= ends[:-1]).all():
+            cut = np.c_[starts, ends].reshape(-1)
+            cut = cut[:-1] if cut[-1] == len(model.positions) else cut  # the last range then runs to the end
+            hi = np.maximum.reduceat(model.positions, cut, axis=0)[::2].astype(np.float64)
+            lo = np.minimum.reduceat(model.positions, cut, axis=0)[::2].astype(np.float64)
+            out[order] = np.linalg.norm(hi - lo, axis=1)
+            return out
+    for i in live:
+        mesh = model.meshes[i]
+        pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
+        out[i] = float(np.linalg.norm(pos.max(0).astype(np.float64) - pos.min(0)))
     return out
 
 
@@ -32,29 +44,43 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
 
     Vertices are not welded: a UV or normal seam counts as open in every level alike, and
     simplification keeps seams (shortened, never lengthened), so the growth over LOD0 is what
-    the level opened. Edges are 1-D int64 keys, so a million triangles take a sort of 3M integers.
+    the level opened. Edges are 1-D integer keys (uint32 when the mesh has under 65,536
+    vertices, else int64), so a million triangles take a sort of 3M integers. Meshes with the same
+    indices (placed copies of one mesh: MetalRoughSpheresNoTextures' 99 spheres) have the same open
+    edges as index pairs: found once, measured on each mesh's own positions.
     """
+    import hashlib  # noqa: PLC0415
+
     total = np.zeros(len(model.meshes))
+    found: dict[tuple[int, int, bytes], tuple[np.ndarray, np.ndarray]] = {}  # indices -> open edges (u, v)
     for i, mesh in enumerate(model.meshes):
         if not mesh.lods:
             continue
         level = mesh.lods[min(lod, len(mesh.lods) - 1)]
-        t = model.indices[level.first_index:level.first_index + level.index_count].reshape(-1, 3).astype(np.int64)
+        t = model.indices[level.first_index:level.first_index + level.index_count].reshape(-1, 3)
         if not len(t):
             continue
         pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
-        t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]  # collapsed triangles draw nothing
-        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
-        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
-        keys = np.minimum(a, b) * np.int64(mesh.vertex_count + 1) + np.maximum(a, b)
-        keys.sort()
-        if not keys.size:
+        key = (mesh.vertex_count, t.size, hashlib.blake2b(t.tobytes(), digest_size=20).digest())
+        if key in found:
+            u, v = found[key]
+            total[i] = float(np.linalg.norm(pos[u] - pos[v], axis=1).sum()) if u.size else 0.0
             continue
-        starts = np.r_[True, keys[1:] != keys[:-1]]
-        ends = np.r_[keys[1:] != keys[:-1], True]
-        single = keys[starts & ends]
+        t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]  # collapsed triangles draw nothing
+        n = mesh.vertex_count + 1
+        dtype = np.uint32 if n <= 65535 else np.int64
+        a = t.astype(dtype).reshape(-1)                 # corners 0, 1, 2 of each triangle ...
+        b = t[:, [1, 2, 0]].astype(dtype).reshape(-1)   # ... and the next corner: the three edges
+        keys = np.minimum(a, b) * dtype(n) + np.maximum(a, b)
+        keys.sort()
+        if keys.size:
+            change = keys[1:] != keys[:-1]
+            single = keys[np.r_[True, change] & np.r_[change, True]]
+        else:
+            single = keys
+        u, v = single // dtype(n), single % dtype(n)
+        found[key] = (u, v)
         if single.size:
-            u, v = single // (mesh.vertex_count + 1), single % (mesh.vertex_count + 1)
             total[i] = float(np.linalg.norm(pos[u] - pos[v], axis=1).sum())
     return total
 

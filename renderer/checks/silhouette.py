@@ -39,7 +39,17 @@ def drawn_groups(model: RenderModel, lod: int = 0) -> list[np.ndarray]:
     return out
 
 
-def projected_box(cam, groups: list[np.ndarray]) -> tuple[float, float, float, float] | None:
+def group_corners(groups: list[np.ndarray]) -> np.ndarray:
+    """(G, 8, 3): the corners of each non-empty group's axis-aligned box (computed once per model,
+    shared by the views)."""
+    groups = [g for g in groups if len(g)]
+    if not groups:
+        return np.zeros((0, 8, 3))
+    return np.stack([box_corners(g.min(0), g.max(0)) for g in groups])
+
+
+def projected_box(cam, groups: list[np.ndarray], corners: np.ndarray | None = None,
+                  ) -> tuple[float, float, float, float] | None:
     """(x0, y0, x1, y1): the pixel box of the projection of every point of ``groups``, exactly as
     projecting them all, but visiting only the groups that can hold an extreme: a projected coordinate
     is a linear-fractional function of the position (positive denominator in front of the eye), so its
@@ -49,7 +59,8 @@ def projected_box(cam, groups: list[np.ndarray]) -> tuple[float, float, float, f
     groups = [g for g in groups if len(g)]
     if not groups:
         return None
-    corners = np.stack([box_corners(g.min(0), g.max(0)) for g in groups])  # (G, 8, 3)
+    if corners is None:
+        corners = group_corners(groups)  # (G, 8, 3)
     cpx, _ = project_points(cam, corners.reshape(-1, 3))
     cpx = cpx.reshape(len(groups), 8, 2)
     hi, lo = cpx.max(axis=1), cpx.min(axis=1)  # per group: bounds of what its points can reach
@@ -84,7 +95,8 @@ class SilhouetteCheck(Check):
         assert model is not None
         tol = ctx.options.bbox_tolerance_px
         with ctx.timer("compare"):
-            groups = drawn_groups(model)
+            groups = [g for g in drawn_groups(model) if len(g)]
+            corners = group_corners(groups)
         views = []
         for k, (cam, sil) in enumerate(zip(ctx.cams, ctx.coverage)):
             box = compare.bbox(sil)
@@ -96,7 +108,7 @@ class SilhouetteCheck(Check):
                 continue
             fig["renderBox"] = list(box)
             with ctx.timer("compare"):
-                cpu = projected_box(cam, groups)
+                cpu = projected_box(cam, groups, corners)
             if cpu is not None:
                 fig["cpuBox"] = [round(float(v), 2) for v in cpu]
                 err = max(abs(a - b) for a, b in zip(box, cpu))

@@ -125,6 +125,16 @@ class SourceCheck(Check):
                                  "are not drawn"]
         attrs = {"normal": "normal_texture", "metallicRoughness": "metallic_roughness_texture",
                  "occlusion": "occlusion_texture", "emissive": "emissive_texture"}
+        if model.uvs1 is None:  # the build carries no second UV set: its roles there are not drawn on
+            gone = set()         # either side (the loader's notes say so, per material)
+            for m in source.materials:
+                for role, slot in zip(attrs, m.role_uv):
+                    if slot == 1 and getattr(m, attrs[role]) is not None:
+                        setattr(m, attrs[role], None)
+                        gone.add(role)
+            if gone:
+                caveats = caveats + [f"{sorted(gone)} on TEXCOORD_1 drawn on neither side: the build's vertex layout "
+                                     "has no uv1 (build with --layout ...,uv1 to carry it)"]
         undrawn = [r for r in source.sidecar.get("undrawnRoles", []) if r in attrs and any(
             getattr(m, attrs[r]) is not None for m in model.materials)]
         if undrawn and colour_ok:  # the build draws a role the reference cannot (another UV set elsewhere)

@@ -11,10 +11,10 @@
 // position is the only varying (lavapipe sets up every varying of every triangle).
 layout(location = 0) in vec3 vPos;
 #ifdef PLAIN
-const vec2 vUV = vec2(0.0);
+const vec4 vUV = vec4(0.0);
 const vec4 vColor = vec4(1.0);
 #else
-layout(location = 1) in vec2 vUV;
+layout(location = 1) in vec4 vUV;  // xy the layout's uv0 (the base colour's set), zw its uv1 (the other set)
 layout(location = 2) in vec4 vColor;
 #endif
 layout(location = 0) out vec4 outColor;
@@ -24,6 +24,8 @@ struct Material {
     vec4 params;      // x alphaCutoff, y alphaMode (0 OPAQUE, 1 MASK, 2 BLEND), z normal-map slot (0: none),
                       // w 1 (x, y, z stored) or 2 (x, y stored: z rebuilt)
     vec4 roles;       // slots: x metallic-roughness, y occlusion, z emissive (0: none)
+    vec4 uvSets;      // the UV set each role samples (0 uv0, 1 uv1): x normal, y metallic-roughness,
+                      // z occlusion, w emissive
 };
 layout(std430, set = 0, binding = 0) readonly buffer Materials { Material materials[]; };
 // Fixed-size array (lavapipe has no descriptor indexing), indexed by a push constant:
@@ -46,12 +48,13 @@ void main() {
         outColor = vec4((gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5, 0.0, 0.0, 1.0);  // double-sided), 0.5 where
         return;                     // a back face is nearest; alpha 1 wherever anything covers
     }
+    Material m = materials[pc.sel.x];
+    vec2 uvN = m.uvSets.x > 0.5 ? vUV.zw : vUV.xy;  // the normal map's UV set
     vec3 dp1 = dFdx(vPos), dp2 = dFdy(vPos);  // derivatives first: before any discard
-    vec2 duv1 = dFdx(vUV), duv2 = dFdy(vUV);
+    vec2 duv1 = dFdx(uvN), duv2 = dFdy(uvN);
     vec3 n = normalize(cross(dp1, dp2));
     vec3 toEye = normalize(pc.eye.xyz - vPos);
     if (dot(n, toEye) < 0.0) n = -n;
-    Material m = materials[pc.sel.x];
     int nslot = int(m.params.z + 0.5);
     if (nslot > 0) {
         // Normal map in a per-pixel tangent frame from the position and UV derivatives (the
@@ -62,22 +65,22 @@ void main() {
         vec3 T = dp2perp * duv1.x + dp1perp * duv2.x;
         vec3 B = dp2perp * duv1.y + dp1perp * duv2.y;
         float scale = inversesqrt(max(max(dot(T, T), dot(B, B)), 1e-30));
-        vec3 tn = texture(textures[nslot], vUV).xyz * 2.0 - 1.0;
+        vec3 tn = texture(textures[nslot], uvN).xyz * 2.0 - 1.0;
         if (m.params.w > 1.5) tn.z = sqrt(max(0.0, 1.0 - dot(tn.xy, tn.xy)));  // BC5 / EAC RG11: x, y only
         vec3 mapped = T * scale * tn.x - B * scale * tn.y + n * tn.z;
         if (dot(mapped, mapped) > 1e-12) n = normalize(mapped);
     }
-    vec4 base = m.baseColor * texture(textures[pc.sel.y], vUV) * vColor;
+    vec4 base = m.baseColor * texture(textures[pc.sel.y], vUV.xy) * vColor;
     int mode = int(m.params.y + 0.5);
     if (mode == 1 && base.a < m.params.x) discard;
     if (mode != 2) base.a = 1.0;
     vec3 L = normalize(pc.lightDir.xyz);
     float nl = max(dot(n, L), 0.0);
     int mrslot = int(m.roles.x + 0.5), aoslot = int(m.roles.y + 0.5), emslot = int(m.roles.z + 0.5);
-    float ao = aoslot > 0 ? texture(textures[aoslot], vUV).r : 1.0;
+    float ao = aoslot > 0 ? texture(textures[aoslot], m.uvSets.z > 0.5 ? vUV.zw : vUV.xy).r : 1.0;
     vec3 rgb;
     if (mrslot > 0) {
-        vec4 mr = texture(textures[mrslot], vUV);
+        vec4 mr = texture(textures[mrslot], m.uvSets.y > 0.5 ? vUV.zw : vUV.xy);
         float metal = mr.b;
         float a = max(mr.g * mr.g, 0.02);  // GGX alpha = roughness^2, floored: no sub-pixel highlight
         vec3 f0 = mix(vec3(0.04), base.rgb, metal);
@@ -93,7 +96,7 @@ void main() {
     } else {
         rgb = base.rgb * (0.3 * ao + 0.7 * nl);
     }
-    if (emslot > 0) rgb += texture(textures[emslot], vUV).rgb;
+    if (emslot > 0) rgb += texture(textures[emslot], m.uvSets.w > 0.5 ? vUV.zw : vUV.xy).rgb;
     outColor = vec4(rgb, base.a);
     if (pc.sel.z == 3) {            // shaded + facing in one pass (OPAQUE materials, no culling): alpha 1
         outColor.a = (gl_FrontFacing || pc.sel.w == 1) ? 1.0 : 0.5;  // where the nearest surface faces the
