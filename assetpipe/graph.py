@@ -355,6 +355,28 @@ class Graph:
             a.skipped.append(f"{why} in {skipped} of {len(uvs)} mesh(es): written as zeros")
         return out
 
+    def _uv_set_warnings(self, a: AssetState, meta: dict) -> list[str]:
+        """Textures sampling a UV set the vertex layout does not carry (docs/FORMAT.md: uv0 holds
+        the set the base colour samples, uv1 the other of TEXCOORD_0/1): an engine drawing them
+        with uv0 shows them wrong, so the build says so."""
+        layout = self._layout(a)
+        if "uv0" not in layout:
+            return []
+        out = []
+        used = {m for m in meta["meshMaterials"] if 0 <= m < len(meta["materials"])}
+        for mi in sorted(used):
+            mat = meta["materials"][mi]
+            base = int(mat["textures"].get("baseColor", {}).get("texCoord", 0))
+            for role, tex in mat["textures"].items():
+                tc = int(tex["texCoord"])
+                if tc == base or (tc in (0, 1) and base in (0, 1) and "uv1" in layout):
+                    continue
+                where = ("add uv1 to --layout to carry it" if tc in (0, 1) and base in (0, 1)
+                         else "no layout attribute carries it")
+                out.append(f"material {mi} ({mat['name']}): its {role} texture samples TEXCOORD_{tc}, "
+                           f"which the vertex layout does not carry (uv0 holds TEXCOORD_{base}); {where}")
+        return out
+
     def _mesh(self, assets: list[AssetState]) -> None:
         jobs = []
         for a in assets:
@@ -367,6 +389,7 @@ class Graph:
                 blob = imp["blobs"]["geometry"]
                 if not suffix:
                     uvs = lod0_uvs = self._uv_sets(a, imp["meta"])
+                    a.warnings.extend(self._uv_set_warnings(a, imp["meta"]))
                 else:  # levels of a hand-made list follow LOD0's decisions (same materials)
                     uvs = steps.uv_sets(imp["meta"]["materials"], imp["meta"]["meshMaterials"])
                     if len(uvs) == len(lod0_uvs):

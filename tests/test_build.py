@@ -404,3 +404,24 @@ def test_a_failed_rebuild_keeps_the_earlier_outputs_on_the_examples(tmp_path):
     assert "crate.gltf" in r.output and "Traceback" not in r.output
     assert {p: (out / p).read_bytes() for p in outputs_of(out)} == before
     assert not list(out.rglob("*.tmp"))
+
+
+def test_a_texture_on_a_uv_set_the_layout_lacks_is_named_in_the_warnings(tmp_path):
+    # the pbr kind's occlusion samples TEXCOORD_1, its base colour TEXCOORD_0: the default layout
+    # (position, uv0) does not carry that set, so the build says which role and what to do;
+    # with uv1 in the layout there is nothing to say
+    from validate_assets import write_assets
+
+    write_assets(tmp_path / "src", ("pbr", "multiuv"))
+    for layout, want in (("position,uv0", True), ("position,uv0,uv1", False)):
+        out = tmp_path / f"out-{want}"
+        r = run_build(str(tmp_path / "src"), "-o", str(out), "--layout", layout, "--no-lod",
+                      "--json", str(tmp_path / "r.json"))
+        assert r.exit_code == 0, r.output
+        report = {a["id"]: a for a in json.loads((tmp_path / "r.json").read_text())["assets"]}
+        pbr = [w for a, rep in report.items() if a.endswith("pbr") for w in rep["warnings"]]
+        said = [w for w in pbr if "occlusion texture samples TEXCOORD_1" in w and "add uv1 to --layout" in w]
+        assert bool(said) == want, pbr
+        # multiuv: its base colour is on TEXCOORD_1, so uv0 holds that set: nothing missing
+        assert not any("TEXCOORD" in w for a, rep in report.items() if a.endswith("multiuv")
+                       for w in rep["warnings"])
