@@ -295,8 +295,9 @@ def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     ph, pw = padded.shape[:2]
     # etcpak holds the GIL while it encodes (a thread running it lets no Python run), so
     # threads over strips of a level gain nothing: one call per level; levels of many textures
-    # run in parallel in the build's worker processes. Always a copy (tobytes): etcpak's ETC2
-    # RGBA encoder writes into its input buffer (an array passed as a buffer came back changed).
+    # run in parallel in the build's worker processes. Always a fresh copy (tobytes): etcpak's
+    # ETC1/ETC2/EAC encoders (every build) swap R and B in the buffer they are given, even a
+    # `bytes` object, so a second encoder given the same buffer encodes blue as red.
     data = _encoder(fmt.vk_format)(padded.tobytes(), pw, ph)
     shape = (ph // 4, pw // 4, fmt.block_bytes)
     out = np.frombuffer(data, dtype=np.uint8)

@@ -530,3 +530,32 @@ def test_etcpak_build_cap_and_override_choose_the_etc2_encoder(monkeypatch):
     monkeypatch.setenv(ETCPAK_BUILD_ENV, "avx3")
     with pytest.raises(ConfigError, match=r"ASSETPIPE_ETCPAK_BUILD='avx3' is not an etcpak build"):
         etcpak_builds()
+
+
+def test_benchmark_best_per_block_is_at_least_as_good_as_each_encoder():
+    """benchmarks/textures.py section 7 measures 'the better of two encoders per block' (choosing
+    between library outputs): the blocks it picks decode at least as close as either input's, and
+    each block is one of the inputs' blocks."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from textures import best_per_block
+
+    from assetpipe.pipelines.texture_compress import etcpak_builds, psnr, use_etcpak_build
+
+    rng = np.random.default_rng(3)
+    level = np.zeros((32, 32, 4), np.uint8)
+    level[..., :3] = rng.integers(0, 256, (32, 32, 3))
+    level[8:24, 8:24, :3] = np.linspace(0, 255, 16, dtype=np.uint8)[None, :, None]  # smooth part
+    level[..., 3] = 255
+    fmt = choose_format("etc2", ROLE_BASE_COLOR, True, False)
+    cands = []
+    for build in (etcpak_builds()[0], "none"):
+        with use_etcpak_build(build):
+            cands.append(compress_level(level, fmt).reshape(-1))
+    best = best_per_block(level, cands, fmt.vk_format)
+    q = [psnr(level[..., :3], decode_level(c, fmt.vk_format, 32, 32)[..., :3]) for c in cands + [best]]
+    assert q[2] >= max(q[:2]), q
+    blocks = best.reshape(-1, 8)
+    assert all((blocks[i] == cands[0].reshape(-1, 8)[i]).all() or (blocks[i] == cands[1].reshape(-1, 8)[i]).all()
+               for i in range(blocks.shape[0]))
