@@ -678,7 +678,7 @@ def run_etc2_options(textures, level0s, peer_dirs: list[Path], slow_limit: int) 
             elif "No module named" in r.stderr:
                 notes["ispc-texcomp ETC1 (slow profile)"] = "not installed (--candidates-path: ispc-texcomp)"
             else:
-                why = (r.stderr.strip().splitlines() or ["?"])[-1][:90]
+                why = ((r.stderr + r.stdout).strip().splitlines() or ["?"])[-1][:90] + f", exit {r.returncode}"
                 notes.setdefault("ispc-texcomp ETC1 (slow profile)", "")
                 notes["ispc-texcomp ETC1 (slow profile)"] += f"ABORTED the process on {label} ({why}); "
             png = Path(tmp) / "in.png"
