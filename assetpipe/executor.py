@@ -328,7 +328,7 @@ class DaskExecutor:
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the step crashed every worker it met
                 status, value, secs, blobs = "internal", f"{type(exc).__name__} on the Dask cluster: {exc}", 0.0, {}
             f.release()
-            if status == "refused":  # a worker that joined after the check below: no bytes of another build
+            if status == "refused":  # a worker that joined after _check_worker_builds: no bytes of another build
                 raise WorkerBuildError(str(value))
             back = 0
             for digest, data in blobs.items():
