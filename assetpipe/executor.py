@@ -22,6 +22,16 @@ Two executors exist:
   library versions differ from the client's refuses the step (its output would be stored
   under the client's key), so a mixed farm fails loudly instead of poisoning the cache.
 
+ETC2/EAC blocks also depend on the etcpak build that encodes them (its SIMD variant, chosen by
+CPU), so an ETC2 texture step's key names that build (:func:`machine_libs`). The key is made
+on the client, with the client's build; the worker encodes with **the build the key names**
+(``texture_compress.use_etcpak_build``: an AVX-512 worker runs the AVX2 build for a client on an
+AVX2 CPU), so the bytes are those a local build on the client makes. A worker whose CPU cannot
+run that build cannot make those bytes: before a phase with ETC2 steps the client asks every
+worker which builds it runs and stops the build with one line naming the worker and the build
+to key by instead (``ASSETPIPE_ETCPAK_BUILD`` on the client); a worker that joins later and
+gets such a step refuses it, and the build stops with the same kind of line.
+
 Dask's nanny starts worker processes with ``MALLOC_TRIM_THRESHOLD_=65536``
 (``distributed.nanny.pre-spawn-environ``). Setting it turns off glibc's adaptive mmap threshold:
 every array above 128 KiB is then a fresh mmap, zero-filled page by page and unmapped when
@@ -52,6 +62,10 @@ CONNECT_TIMEOUT = 10.0  # seconds to reach the scheduler before giving up with o
 
 class SchedulerError(AssetpipeError):
     """The Dask scheduler cannot be reached (or was lost during the build)."""
+
+
+class WorkerBuildError(SchedulerError):
+    """A worker cannot run the library build a step's key names (ETC2: the etcpak build)."""
 
 
 _fingerprint: str | None = None
@@ -99,6 +113,37 @@ def input_blobs(fn, args: list) -> list[str]:
     return blob_digests(args)
 
 
+def machine_libs(fn, args: list) -> dict:
+    """The parts of a task's key that depend on the machine's build of a library rather than its
+    version (``{}`` for most tasks): for an ETC2 texture step ``{"etcpak-build": NAME}``, made
+    by the same function as the key (``steps.texture_key_libs``), so they cannot disagree."""
+    if fn is steps.task_texture:
+        return steps.texture_key_libs({}, args[-1])
+    return {}
+
+
+def etcpak_builds_here() -> list[str]:
+    """On a worker (``client.run``): the etcpak builds this process can encode ETC2/EAC with."""
+    from assetpipe.pipelines.texture_compress import etcpak_builds
+
+    return list(etcpak_builds())
+
+
+def _cannot_run(machine: dict) -> str | None:
+    """Why this process cannot make the bytes ``machine`` names (None: it can)."""
+    build = machine.get("etcpak-build")
+    if build is None:
+        return None
+    from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV, etcpak_builds
+
+    here = etcpak_builds()
+    if build in here:
+        return None
+    return (f"worker {os.uname().nodename} pid {os.getpid()} cannot run etcpak build {build}, which the ETC2 "
+            f"texture keys name (it runs {', '.join(here)}; their blocks differ): set {ETCPAK_BUILD_ENV}="
+            f"{here[0]} on the client so that the keys name a build every worker runs, or leave this worker out")
+
+
 def _absolute(fn, args: list) -> list:
     """Source paths made absolute (a worker's working folder is not the client's)."""
     args = list(args)
@@ -144,10 +189,14 @@ def step_malloc() -> str:
     return _malloc_done
 
 
-def run_on_worker(fn, args: list, inputs: dict[str, bytes], fingerprint: str):
-    """On a worker: run one task against a scratch store holding ``inputs``.
+def run_on_worker(fn, args: list, inputs: dict[str, bytes], fingerprint: str, machine: dict | None = None):
+    """On a worker: run one task against a scratch store holding ``inputs``, with the library
+    builds ``machine`` names (:func:`machine_libs`; status ``"refused"`` when this worker cannot
+    run them).
 
     Returns (status, value, seconds, {digest: bytes} of the blobs the record names)."""
+    import contextlib
+
     from assetpipe.cache.store import Store
 
     step_malloc()
@@ -156,13 +205,22 @@ def run_on_worker(fn, args: list, inputs: dict[str, bytes], fingerprint: str):
         return ("internal", f"worker {os.uname().nodename} pid {os.getpid()} runs a different assetpipe or "
                 f"library versions than the client (environment {mine} != {fingerprint}); install the same "
                 "versions on every worker", 0.0, {})
+    machine = machine or {}
+    why = _cannot_run(machine)
+    if why is not None:
+        return "refused", why, 0.0, {}
     root = tempfile.mkdtemp(prefix="assetpipe-step-")
     try:
         store = Store(Path(root))
         for digest, data in inputs.items():
             if store.put_blob(data) != digest:
                 return "internal", f"input blob {digest} arrived damaged", 0.0, {}
-        status, value, secs = steps.call_task(fn, root, *args)
+        with contextlib.ExitStack() as stack:
+            if "etcpak-build" in machine:  # encode with the build the key names, not this CPU's best
+                from assetpipe.pipelines.texture_compress import use_etcpak_build
+
+                stack.enter_context(use_etcpak_build(machine["etcpak-build"]))
+            status, value, secs = steps.call_task(fn, root, *args)
         blobs: dict[str, bytes] = {}
         if status == "ok":
             for digest in value["blobs"].values():
@@ -193,6 +251,7 @@ class DaskExecutor:
         # seconds (reading inputs and submitting; fetching, checking and storing results)
         self.moved = {"to_workers": 0, "from_workers": 0, "tasks": 0, "client_s": 0.0}
         self.per_step: dict[str, dict] = {}  # task name -> {"tasks", "to_workers", "from_workers", "seconds"}
+        self.worker_builds: dict[str, list[str]] = {}  # worker address -> etcpak builds it runs (asked once)
 
     def _connect(self):
         if self.client is not None:
@@ -224,6 +283,8 @@ class DaskExecutor:
 
         client = self._connect()
         fp = environment_fingerprint()
+        machines = [machine_libs(fn, args) for fn, _root, *args in calls]
+        self._check_worker_builds(client, {m["etcpak-build"] for m in machines if "etcpak-build" in m})
         workers = len(client.scheduler_info().get("workers", {})) or 8
         window = max(16, 4 * workers)
         results: list = [None] * len(calls)
@@ -237,6 +298,7 @@ class DaskExecutor:
             except StopIteration:
                 return False
             t0 = time.perf_counter()
+            machine = machines[i]
             args = _absolute(fn, args)
             inputs = {}
             for d in dict.fromkeys(input_blobs(fn, args)):
@@ -245,7 +307,7 @@ class DaskExecutor:
                     inputs[d] = data
             with warnings.catch_warnings():  # "large graph": the inputs travel with the task on purpose
                 warnings.simplefilter("ignore", UserWarning)
-                f = client.submit(run_on_worker, fn, args, inputs, fp, pure=False,
+                f = client.submit(run_on_worker, fn, args, inputs, fp, machine or None, pure=False,
                                   key=f"{fn.__name__}-{uuid.uuid4().hex}")
             running[f.key] = (i, fn, sum(len(b) for b in inputs.values()))
             done.add(f)
@@ -266,6 +328,8 @@ class DaskExecutor:
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: the step crashed every worker it met
                 status, value, secs, blobs = "internal", f"{type(exc).__name__} on the Dask cluster: {exc}", 0.0, {}
             f.release()
+            if status == "refused":  # a worker that joined after _check_worker_builds: no bytes of another build
+                raise WorkerBuildError(str(value))
             back = 0
             for digest, data in blobs.items():
                 back += len(data)
@@ -286,6 +350,28 @@ class DaskExecutor:
             self.moved["client_s"] += time.perf_counter() - t0
             submit_next()
         return results
+
+    def _check_worker_builds(self, client, wanted: set[str]) -> None:
+        """Before ETC2 steps run: every worker must run the etcpak build(s) their keys name
+        (else its blocks would not be the ones the key describes). Asked once per worker."""
+        if not wanted:
+            return
+        from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV, ETCPAK_BUILD_ORDER, etcpak_builds
+
+        workers = set(client.scheduler_info().get("workers", {}))
+        if not workers <= set(self.worker_builds):
+            self.worker_builds.update(client.run(etcpak_builds_here))
+        for addr in sorted(workers):
+            runs = self.worker_builds.get(addr)
+            missing = sorted(wanted - set(runs or wanted))
+            if missing:
+                common = set(etcpak_builds()).intersection(*(self.worker_builds.get(a, ["none"]) for a in workers))
+                best = min(common, key=ETCPAK_BUILD_ORDER.index) if common else "none"
+                raise WorkerBuildError(
+                    f"worker {addr} cannot run etcpak build {', '.join(missing)}, which this build's ETC2 texture "
+                    f"keys name (this machine's; the worker runs {', '.join(runs)}; their blocks differ): set "
+                    f"{ETCPAK_BUILD_ENV}={best} here so that the keys name a build every worker runs, or leave that "
+                    "worker out")
 
     def close(self):
         if self._own_client and self.client is not None:

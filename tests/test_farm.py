@@ -163,3 +163,129 @@ def test_worker_with_other_versions_refuses(tmp_path):
 def test_blob_digests_finds_nested_digests():
     d1, d2 = "xxh3:" + "1" * 32, "xxh3:" + "2" * 32
     assert blob_digests(["root", d1, [{"a": d2, "b": "xxh3"}], 3]) == [d1, d2]
+
+
+# -- ETC2 on the farm: the key names the etcpak build, the worker encodes with that build ---------
+
+def _etc2_options():
+    import dataclasses
+
+    return dataclasses.replace(DEFAULT_BUILD_OPTIONS,
+                               texture=dataclasses.replace(DEFAULT_BUILD_OPTIONS.texture, compression="etc2"))
+
+
+@pytest.fixture(scope="module")
+def etc2_models(tmp_path_factory) -> Path:
+    src = tmp_path_factory.mktemp("etc2-models")
+    make_model(src, "e", 8, seed=5, texture=64)  # noise: every etcpak build encodes it differently
+    return src
+
+
+def _local(models, tmp: Path, name: str):
+    report = run_build([models], tmp / name, _etc2_options(), cache_dir=Store(tmp / f"{name}-cache"))
+    assert not report.failed, [r.error for r in report.results]
+    return tree(tmp / name)
+
+
+def test_etc2_on_workers_is_encoded_with_the_build_the_key_names(cluster, etc2_models, tmp_path, monkeypatch):
+    """The client keys ETC2 steps by its etcpak build (here capped to the portable one by
+    ASSETPIPE_ETCPAK_BUILD); the workers' CPUs run a better build, yet they encode with the one
+    the key names: the farm's KTX2 files are the client's local build's, byte for byte."""
+    from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV, etcpak_builds
+
+    assert len(etcpak_builds()) >= 2, "needs a CPU with an etcpak SIMD build (every x86-64 with SSE4.1)"
+    own = _local(etc2_models, tmp_path, "local-best")
+    monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
+    ref = _local(etc2_models, tmp_path, "local-none")
+    ktx = {p for p in ref if p.endswith(".ktx2")}  # named by content
+    assert ktx and ktx != {p for p in own if p.endswith(".ktx2")}, "the two builds' blocks differ on noise"
+    store = Store(tmp_path / "farm-cache")
+    ex = DaskExecutor(cluster.scheduler_address)
+    try:
+        report = run_build([etc2_models], tmp_path / "farm", _etc2_options(), cache_dir=store, scheduler=ex)
+    finally:
+        ex.close()
+    assert not report.failed, [r.error for r in report.results]
+    assert ex.per_step["task_texture"]["tasks"] == 1
+    assert ex.worker_builds and all(v[0] != "none" for v in ex.worker_builds.values())  # better CPUs
+    assert tree(tmp_path / "farm") == ref
+
+
+@pytest.fixture()
+def mixed_cluster():
+    """A real cluster of two workers on different etcpak builds: one LocalCluster worker (this
+    CPU's best build) and a `dask worker` process started with ASSETPIPE_ETCPAK_BUILD=none (a
+    CPU without SIMD). Yields (cluster, address of the portable-only worker)."""
+    import subprocess
+    import sys
+
+    from distributed import Client, LocalCluster
+
+    from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV
+
+    c = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
+    dask = Path(sys.executable).with_name("dask")
+    proc = subprocess.Popen([str(dask), "worker", c.scheduler_address, "--nthreads", "1", "--host", "127.0.0.1",
+                             "--no-dashboard", "--name", "portable-only"],
+                            env={**os.environ, ETCPAK_BUILD_ENV: "none"},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with Client(c.scheduler_address, set_as_default=False, timeout=30) as client:
+            client.wait_for_workers(2, timeout=60)
+            caps = client.run(lambda: os.environ.get(ETCPAK_BUILD_ENV))
+        (portable,) = [addr for addr, cap in caps.items() if cap == "none"]
+        yield c, portable
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        c.close()
+
+
+def test_etc2_refused_when_a_worker_cannot_run_the_keys_build(mixed_cluster, etc2_models, tmp_path, monkeypatch):
+    """A worker that cannot run the etcpak build the ETC2 keys name would store other blocks under
+    those keys: the build stops with one line naming the worker and the build to key by; that
+    worker, sent such a step anyway (one that joined after the check), refuses it; keyed by a
+    build every worker runs, the farm build succeeds and equals the local one."""
+    from distributed import Client
+
+    from assetpipe import steps
+    from assetpipe.executor import WorkerBuildError, environment_fingerprint
+    from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV, etcpak_builds
+
+    cluster, portable = mixed_cluster
+    best = etcpak_builds()[0]
+    assert best != "none", "needs a CPU with an etcpak SIMD build (every x86-64 with SSE4.1)"
+    ex = DaskExecutor(cluster.scheduler_address)
+    try:
+        with pytest.raises(WorkerBuildError, match=rf"worker {portable} cannot run etcpak build {best}, .* set "
+                                                   rf"{ETCPAK_BUILD_ENV}=none here"):
+            run_build([etc2_models], tmp_path / "out", _etc2_options(), cache_dir=Store(tmp_path / "c"), scheduler=ex)
+        assert "task_texture" not in ex.per_step  # no ETC2 step was sent anywhere
+        assert ex.worker_builds[portable] == ["none"]
+        # the worker's own check: sent a step keyed by `best`, it refuses; keyed by its build, it runs
+        image = {"name": "e.png", "mime": "image/png", "digest": None, "path": "e.png"}
+        args = [image, str(etc2_models), "baseColor", "OPAQUE", 0.5, steps.options_to_json(_etc2_options().texture)]
+        with Client(cluster.scheduler_address, set_as_default=False, timeout=30) as client:
+            for build, want in ((best, "refused"), ("none", "ok")):
+                status, value, _, _ = client.submit(run_on_worker, steps.task_texture, args, {},
+                                                    environment_fingerprint(), {"etcpak-build": build},
+                                                    workers=[portable], pure=False).result()
+                assert status == want, value
+                if want == "refused":
+                    assert f"cannot run etcpak build {best}" in value and f"{ETCPAK_BUILD_ENV}=none" in value
+    finally:
+        ex.close()
+    # the way out the message names: key by the portable build on the client
+    monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
+    ref = _local(etc2_models, tmp_path, "local-none")
+    ex = DaskExecutor(cluster.scheduler_address)
+    try:
+        report = run_build([etc2_models], tmp_path / "farm", _etc2_options(), cache_dir=Store(tmp_path / "fc"),
+                           scheduler=ex)
+    finally:
+        ex.close()
+    assert not report.failed, [r.error for r in report.results]
+    assert tree(tmp_path / "farm") == ref

@@ -494,3 +494,68 @@ def test_bc7_settings_keep_mode_1():
     # label textures lose more (up to 6.4 dB, uv0.png 86.1 -> 79.7) at 42 dB and above.
     assert ours >= full - 1.38, (ours, full)
     assert ours > no_mode1 + 1.0, (ours, no_mode1)
+
+
+def test_etcpak_build_cap_and_override_choose_the_etc2_encoder(monkeypatch):
+    """ASSETPIPE_ETCPAK_BUILD caps the builds this process may use (a farm client keys ETC2 by a
+    build every worker runs; a test worker stands for a weaker CPU); use_etcpak_build makes a
+    worker encode with the build its task's key names. Each build's blocks are its own."""
+    from assetpipe.core.errors import ConfigError
+    from assetpipe.pipelines.texture_compress import (ETCPAK_BUILD_ENV, etc_module, etcpak_builds, etcpak_variant,
+                                                      use_etcpak_build)
+    from assetpipe.steps import texture_key_libs
+
+    builds = etcpak_builds()
+    assert builds[-1] == "none" and etcpak_variant() == builds[0]
+    rng = np.random.default_rng(7)
+    level = rng.integers(0, 256, (16, 16, 4), dtype=np.uint8)
+    level[..., 3] = 255
+    fmt = choose_format("etc2", ROLE_BASE_COLOR, True, False)
+    blocks = {}
+    for b in builds:
+        with use_etcpak_build(b):
+            assert etcpak_variant() == b and etc_module().__spec__.name == f"etcpak._etcpak_{b}"
+            assert texture_key_libs({}, {"compression": "etc2"}) == {"etcpak-build": b}
+            blocks[b] = compress_level(level, fmt).tobytes()
+        assert etcpak_variant() == builds[0]  # the override ends with its block
+    if len(builds) > 1:  # the portable build's heuristics differ from the SIMD ones on noise
+        assert blocks["none"] != blocks[builds[0]]
+    monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
+    assert etcpak_builds() == ("none",) and etcpak_variant() == "none"
+    assert compress_level(level, fmt).tobytes() == blocks["none"]
+    assert texture_key_libs({}, {"compression": "etc2"}) == {"etcpak-build": "none"}
+    with pytest.raises(ConfigError, match=r"etcpak build avx2 does not run here \(this CPU runs none\)"):
+        with use_etcpak_build("avx2"):
+            pass
+    monkeypatch.setenv(ETCPAK_BUILD_ENV, "avx3")
+    with pytest.raises(ConfigError, match=r"ASSETPIPE_ETCPAK_BUILD='avx3' is not an etcpak build"):
+        etcpak_builds()
+
+
+def test_benchmark_best_per_block_is_at_least_as_good_as_each_encoder():
+    """benchmarks/textures.py section 7 measures 'the better of two encoders per block' (choosing
+    between library outputs): the blocks it picks decode at least as close as either input's, and
+    each block is one of the inputs' blocks."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from textures import best_per_block
+
+    from assetpipe.pipelines.texture_compress import etcpak_builds, psnr, use_etcpak_build
+
+    rng = np.random.default_rng(3)
+    level = np.zeros((32, 32, 4), np.uint8)
+    level[..., :3] = rng.integers(0, 256, (32, 32, 3))
+    level[8:24, 8:24, :3] = np.linspace(0, 255, 16, dtype=np.uint8)[None, :, None]  # smooth part
+    level[..., 3] = 255
+    fmt = choose_format("etc2", ROLE_BASE_COLOR, True, False)
+    cands = []
+    for build in (etcpak_builds()[0], "none"):
+        with use_etcpak_build(build):
+            cands.append(compress_level(level, fmt).reshape(-1))
+    best = best_per_block(level, cands, fmt.vk_format)
+    q = [psnr(level[..., :3], decode_level(c, fmt.vk_format, 32, 32)[..., :3]) for c in cands + [best]]
+    assert q[2] >= max(q[:2]), q
+    blocks = best.reshape(-1, 8)
+    assert all((blocks[i] == cands[0].reshape(-1, 8)[i]).all() or (blocks[i] == cands[1].reshape(-1, 8)[i]).all()
+               for i in range(blocks.shape[0]))
