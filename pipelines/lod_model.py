@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Hashable, Sequence
 
@@ -29,6 +31,10 @@ import numpy as np
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
+
+#: threads measuring a model's distinct meshes at once (its chains are independent; the
+#: distance kernels release the GIL). Output does not depend on it.
+LOD_THREADS = min(4, os.cpu_count() or 1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,14 +237,28 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
         merged.append((g, verts, pos, idx, uv, normals, others, m_in - idx.shape[0], exact))
 
     copies = find_affine_copies([(m[2], m[3], m[8]) for m in merged])
+    distinct = [i for i in range(len(merged)) if copies[i] is None]
+
+    def chain_of(i: int) -> tuple[LodLevel, ...]:
+        _, _, pos, idx, uv, normals, others, _, _ = merged[i]
+        return build_lod_chain(pos, idx, uv=uv, normals=normals, other_attributes=others,
+                               options=options).levels
+
+    # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
+    # kernels release the GIL); each chain is a pure function of its mesh, so the result does
+    # not depend on the thread count or order
+    threads = min(LOD_THREADS, len(distinct))
+    if threads > 1:
+        distinct.sort(key=lambda i: -merged[i][3].shape[0])
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            source_levels = dict(zip(distinct, pool.map(chain_of, distinct)))
+    else:
+        source_levels = {i: chain_of(i) for i in distinct}
     out: list[LodMesh] = []
-    source_levels: dict[int, tuple[LodLevel, ...]] = {}  # distinct mesh -> levels before reordering
     for i, (g, verts, pos, idx, uv, normals, others, dups, _) in enumerate(merged):
         copy = copies[i]
         if copy is None:
-            chain = build_lod_chain(pos, idx, uv=uv, normals=normals, other_attributes=others,
-                                    options=options)
-            levels = source_levels[i] = chain.levels
+            levels = source_levels[i]
         else:
             j, lin, resid, mirrored = copy
             sigma = float(np.linalg.svd(lin, compute_uv=False)[0])

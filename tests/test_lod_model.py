@@ -238,3 +238,22 @@ def test_best_keeps_the_lower_measured_level():
     # level 2 sees the same two candidates whenever level 1 matches: best <= direct there
     if best.levels[1].indices.tobytes() == direct.levels[1].indices.tobytes():
         assert best.levels[2].hausdorff_rel <= direct.levels[2].hausdorff_rel + 1e-12
+
+
+def test_threads_do_not_change_the_chains(monkeypatch):
+    """Distinct meshes are measured on LOD_THREADS threads: the output is the same, bit for
+    bit, as one thread's (each chain is a pure function of its mesh)."""
+    import assetpipe.pipelines.lod_model as lod_model
+
+    parts = [_part(*_bumpy_sphere(3, seed=s, centre=(3.0 * s, 0, 0)), key=s) for s in range(4)]
+    parts.append(_part(*_grid(30)[:2], key=9))
+    runs = []
+    for threads in (1, 3):
+        monkeypatch.setattr(lod_model, "LOD_THREADS", threads)
+        runs.append(build_model_lods(parts, FAST))
+    assert len(runs[0]) == len(runs[1]) == 5
+    for a, b in zip(*runs):
+        assert a.vertices.tobytes() == b.vertices.tobytes()
+        assert [lv.indices.tobytes() for lv in a.levels] == [lv.indices.tobytes() for lv in b.levels]
+        assert [(lv.hausdorff, lv.rms) for lv in a.levels] == [(lv.hausdorff, lv.rms) for lv in b.levels]
+        assert len(a.levels) > 1
