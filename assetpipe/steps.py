@@ -282,7 +282,7 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
         offset = verts0.shape[0]
         for k, (meta_k, arrays_k) in enumerate(levels[1:], start=1):
             vk, ik = arrays_k[f"{i}.vertices"], arrays_k[f"{i}.indices"]
-            e = measure_error(verts0[:, :3], idx0, vk[:, :3], ik, samples=opts.samples_for(idx0.shape[0]),
+            e = measure_error(verts0[:, :3], idx0, vk[:, :3], ik, samples=opts.bound_samples_for(idx0.shape[0]),
                               seed=opts.error_seed)
             running = max(running, e.hausdorff)
             out_arrays[f"{i}.lod{k}"] = (ik.astype(np.int64) + offset).astype(np.uint32)

@@ -462,7 +462,7 @@ def build_lod_chain(
     # --- measure every chosen level against level 0 (one prepared reference, one batch)
     measured: list[SurfaceError | None] = [None] * len(chosen)
     if est is not None and len(chosen) > 1:
-        ref = prepare_reference(local, idx, samples=options.samples_for(m0), seed=options.error_seed)
+        ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0), seed=options.error_seed)
         measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]])
         for k in range(1, len(chosen)):
             target = error_targets[k] if error_targets is not None else math.inf
