@@ -20,7 +20,7 @@ from assetpipe.core.errors import AssetpipeError
 from . import compare
 from .camera import fit_camera
 from .checks import NAMES, REGISTRY, Context
-from .checks.source import find_source
+from .checks.source import find_source, start_source
 from .checks.textures import SRGB_ROLES
 from .loader import load_built_model
 from .results import DEFAULT_VIEWS, CheckResult, ValidateOptions, ValidationResult
@@ -53,6 +53,8 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
         ctx.load_error = str(exc)
     load_seconds = time.perf_counter() - t0
     drawable = ctx.model is not None and ctx.model.triangles(0) > 0
+    if ctx.model is not None and selected & {"source", "uvs"}:
+        start_source(ctx)  # read on its own thread while the build is uploaded and drawn
     wants_render = any(c.needs_render and c.name in selected for c in REGISTRY)
     results: dict[str, CheckResult] = {}
     try:

@@ -45,20 +45,42 @@ def find_source(model_json: Path, side: dict[str, Any], options: ValidateOptions
     return found[0].resolve() if found else None
 
 
+def start_source(ctx: Context) -> None:
+    """Start reading the context's source model on a thread of its own, so that its parsing,
+    image decoding and mip chains (OpenCV releases the GIL) overlap the build's upload and
+    renders (AlphaBlendModeTest, four 2048^2 images, in-process, alternating: 1.64, 1.72, 1.52 s
+    -> 1.48, 1.33, 1.58 s). :func:`load_source` waits for it; what it returns or raises is the
+    same as reading it there."""
+    if "source" in ctx.cache or "source_future" in ctx.cache or ctx.model is None:
+        return
+    src = find_source(ctx.model_json, ctx.model.sidecar, ctx.options)
+    if src is None:
+        return  # load_source says why
+    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+    from ..source_model import load_source_model  # noqa: PLC0415
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="assetpipe-source")
+    ctx.cache["source_future"] = (src, pool.submit(load_source_model, src, decoded=ctx.cache))
+    pool.shutdown(wait=False)
+
+
 def load_source(ctx: Context) -> tuple[Path | None, Any, str | None]:
     """(source path, trimesh RenderModel or None, why not) for the context's model, memoised."""
     if "source" not in ctx.cache:
         from ..source_model import load_source_model  # noqa: PLC0415
 
         assert ctx.model is not None
-        src = find_source(ctx.model_json, ctx.model.sidecar, ctx.options)
+        started = ctx.cache.pop("source_future", None)
+        src = started[0] if started else find_source(ctx.model_json, ctx.model.sidecar, ctx.options)
         if src is None:
             names = [s.get("path") for s in ctx.model.sidecar.get("sources", [])][:1]
             ctx.cache["source"] = (None, None, f"source {names} not found (set source_root)")
         else:
             try:
                 with ctx.timer("load"):
-                    ctx.cache["source"] = (src, load_source_model(src, decoded=ctx.cache), None)
+                    model = started[1].result() if started else load_source_model(src, decoded=ctx.cache)
+                ctx.cache["source"] = (src, model, None)
             except AssetpipeError as exc:
                 ctx.cache["source"] = (src, None, f"source not importable by trimesh: {exc}")
     return ctx.cache["source"]
