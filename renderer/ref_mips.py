@@ -18,6 +18,7 @@ first, down to 1x1 (``max(1, size >> k)``, the KTX2 rule).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 _CODES = np.arange(256, dtype=np.float64) / 255.0
 # 8-bit sRGB code -> 16-bit linear value, and 16-bit linear -> nearest 8-bit sRGB code
@@ -54,16 +55,55 @@ def mip_chain(rgba: np.ndarray, role: str) -> list[np.ndarray]:
         size = (max(1, w >> k), max(1, h >> k))
         cur = cv2.resize(cur, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], 4)
         if role in COLOUR_ROLES:
-            lv = np.empty(cur.shape, np.uint8)
-            lv[..., :3] = LIN16_TO_SRGB8[cur[..., :3]]
-            lv[..., 3] = np.rint(cur[..., 3] / 257.0)
+            lv = _colour8(cur.reshape(-1, 4), LIN16_TO_SRGB8).reshape(cur.shape)
         elif role == "normal":
-            v = cur[..., :3].astype(np.float32) * np.float32(2 / 65535) - 1
-            v /= np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-            lv = np.empty(cur.shape, np.uint8)
-            lv[..., :3] = np.rint((v + 1) * 127.5).clip(0, 255)
-            lv[..., 3] = np.rint(cur[..., 3] / 257.0)
+            lv = _normal8(cur.reshape(-1, 4)).reshape(cur.shape)
         else:
             lv = np.rint(cur / 257.0).astype(np.uint8)
         out.append(np.ascontiguousarray(lv))
     return out
+
+
+# The per-texel rounding of a level, compiled (numba): the numpy expressions they replace, in
+# the same float arithmetic, took 21 ms (colour) and 90 ms (normal) for a 1024^2 level.
+# tests/test_ref_mips.py holds them equal, bit for bit, to those expressions.
+
+@njit(cache=True, nogil=True)
+def _colour8(cur, table):
+    """(P, 4) uint16 linear -> (P, 4) uint8: rgb the nearest sRGB code, alpha rint(a / 257)."""
+    out = np.empty(cur.shape, np.uint8)
+    for i in range(cur.shape[0]):
+        for c in range(3):
+            out[i, c] = table[cur[i, c]]
+        out[i, 3] = np.uint8(np.rint(np.float64(cur[i, 3]) / 257.0))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _normal8(cur):
+    """(P, 4) uint16 averaged codes -> (P, 4) uint8: the vector renormalised (float32), coded
+    ``rint((v + 1) * 127.5)``; alpha rint(a / 257)."""
+    out = np.empty(cur.shape, np.uint8)
+    scale = np.float32(2 / 65535)
+    one = np.float32(1.0)
+    half = np.float32(127.5)
+    tiny = np.float32(1e-12)
+    v = np.empty(3, np.float32)
+    for i in range(cur.shape[0]):
+        for c in range(3):
+            v[c] = np.float32(cur[i, c]) * scale - one
+        n = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if n < tiny:
+            n = tiny
+        for c in range(3):
+            q = np.rint((v[c] / n + one) * half)
+            out[i, c] = np.uint8(min(max(q, np.float32(0.0)), np.float32(255.0)))
+        out[i, 3] = np.uint8(np.rint(np.float64(cur[i, 3]) / 257.0))
+    return out
+
+
+def warm() -> None:
+    """Load (or compile, the first time) the kernels: part of a renderer process's set-up."""
+    tiny = np.zeros((1, 4), np.uint16)
+    _colour8(tiny, LIN16_TO_SRGB8)
+    _normal8(tiny)

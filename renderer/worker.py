@@ -71,8 +71,10 @@ def _serve() -> int:
                 import PIL.Image  # noqa: F401,PLC0415 - warm imports are part of set-up
                 import trimesh  # noqa: F401,PLC0415
                 from .cull import warm  # noqa: PLC0415 - the culling kernel (numba), loaded once
+                from .ref_mips import warm as warm_mips  # noqa: PLC0415 - the reference's mip kernels
 
                 warm()
+                warm_mips()
                 setup = time.perf_counter() - t0
                 proto.write(json.dumps({"ready": True, "setup": setup}) + "\n")
             if req.get("cmd") == "ping":  # a warm-up: the set-up is reported here, charged to no asset
