@@ -290,10 +290,15 @@ class Renderer:
         return image
 
     # ------------------------------------------------------------------------ models
-    def upload(self, model: RenderModel) -> GpuModel:
-        """Upload vertices, indices, materials and textures of ``model``."""
+    def upload(self, model: RenderModel, cams: list | None = None) -> GpuModel:
+        """Upload vertices, indices, materials and textures of ``model``.
+
+        ``cams``: the only cameras its shaded renders will use (LOD 0). Each texture is then
+        uploaded from the first mip level those renders can sample
+        (:mod:`renderer.texture_levels`; the pictures are the same); None: every level."""
         vk, ctx = self.vk, self.ctx
         t0 = time.perf_counter()
+        first_level = _first_levels(model, cams) if cams else {}
         uv1 = model.uvs1 if model.uvs1 is not None else np.zeros((len(model.positions), 2), np.float32)
         verts = np.concatenate([model.positions, model.uvs, model.colors, uv1], axis=1).astype(np.float32)
         vb = ctx.create_buffer(verts.nbytes, vk.VK_BUFFER_USAGE_VERTEX_BUFFER_BIT)
@@ -318,12 +323,6 @@ class Renderer:
         by_set: list[list[int]] = [[]]  # per descriptor set: indices into pairs, slot 1 onwards
         uploaded: dict[int, int] = {}  # id(Texture) -> its index in pairs
 
-        def image_key(t: Texture) -> tuple:
-            """The same texels: a KTX2 file (a built model's materials each read theirs), or the same
-            level arrays (the reference's textures, one per material with that material's sampler)."""
-            if t.from_ktx2 and t.name:
-                return ("file", t.name, t.vk_format, len(t.levels))
-            return ("levels", id(t.levels), t.vk_format)
         for i, m in enumerate(model.materials):
             roles = (m.texture, m.normal_texture, m.metallic_roughness_texture, m.occlusion_texture,
                      m.emissive_texture)
@@ -336,11 +335,13 @@ class Renderer:
                 if k is None or k not in by_set[-1]:  # the same Texture in two roles: one image
                     if k is None:
                         ik, sk = image_key(t), (repr(sorted(t.sampler.items())), len(t.levels))
+                        skip = first_level.get(ik, 0)
+                        sk = (sk[0], len(t.levels) - skip)
                         if ik not in image_of:
-                            image_of[ik] = self._upload_texture(t, model.notes)
+                            image_of[ik] = self._upload_texture(_from_level(t, skip), model.notes)
                             images.append(image_of[ik])
                         if sk not in sampler_of:
-                            sampler_of[sk] = self._make_sampler(t.sampler, len(t.levels))
+                            sampler_of[sk] = self._make_sampler(t.sampler, len(t.levels) - skip)
                             samplers.append(sampler_of[sk])
                         pairs.append((image_of[ik], sampler_of[sk]))
                         k = uploaded[id(t)] = len(pairs) - 1
@@ -625,3 +626,49 @@ def _decoded(tex: Texture, device: str, notes: list[str] | None) -> Texture:
                      f"{device}: drew its levels decoded on the CPU")
     return Texture(name=tex.name, levels=levels, sampler=tex.sampler, from_ktx2=tex.from_ktx2,
                    vk_format=VK_FORMAT_R8G8B8A8_SRGB if fmt.srgb else VK_FORMAT_R8G8B8A8_UNORM)
+
+
+def image_key(t: Texture) -> tuple:
+    """The same texels: a KTX2 file (a built model's materials each read theirs), or the same
+    level arrays (the reference's textures, one per material with that material's sampler)."""
+    if t.from_ktx2 and t.name:
+        return ("file", t.name, t.vk_format, len(t.levels))
+    return ("levels", id(t.levels), t.vk_format)
+
+
+def _first_levels(model: RenderModel, cams: list) -> dict[tuple, int]:
+    """Per uploaded image (:func:`image_key`), the first level the shaded renders by ``cams``
+    can sample: the smallest over every material and role drawing it
+    (:func:`renderer.texture_levels.first_sampled_level`)."""
+    from .texture_levels import first_sampled_level  # noqa: PLC0415
+
+    tris: dict[int, list[np.ndarray]] = {}
+    for mesh in model.meshes:
+        lod = mesh.lods[0]
+        idx = model.indices[lod.first_index:lod.first_index + lod.index_count].astype(np.int64)
+        tris.setdefault(mesh.material, []).append(idx.reshape(-1, 3) + mesh.vertex_base)
+    uv1 = model.uvs1 if model.uvs1 is not None else np.zeros_like(model.uvs)
+    out: dict[tuple, int] = {}
+    for i, m in enumerate(model.materials):
+        drawn = np.concatenate(tris[i]) if i in tris else np.zeros((0, 3), np.int64)
+        roles = ((m.texture, 0), (m.normal_texture, m.role_uv[0]), (m.metallic_roughness_texture, m.role_uv[1]),
+                 (m.occlusion_texture, m.role_uv[2]), (m.emissive_texture, m.role_uv[3]))
+        for t, uv_set in roles:
+            if t is None:
+                continue
+            k = image_key(t)
+            level = first_sampled_level(model.positions, uv1 if uv_set else model.uvs, drawn,
+                                        (t.width, t.height), cams, len(t.levels),
+                                        t.sampler.get("minFilter")) if drawn.size else len(t.levels) - 1
+            out[k] = min(out.get(k, level), level)
+    return out
+
+
+def _from_level(t: Texture, first: int) -> Texture:
+    """``t`` without its ``first`` finest levels (level ``first`` becomes level 0)."""
+    if first <= 0:
+        return t
+    import dataclasses  # noqa: PLC0415
+
+    return dataclasses.replace(t, levels=list(t.levels[first:]),
+                               size=t.level_size(first) if t.size is not None else None)

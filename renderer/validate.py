@@ -59,11 +59,11 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
     results: dict[str, CheckResult] = {}
     try:
         if drawable and wants_render:
-            with ctx.timer("upload"):
-                ctx.gpu = renderer.upload(ctx.model)
-            result.notes += [n for n in ctx.model.notes if n not in result.notes]  # e.g. a format decoded on the CPU
             ctx.cams = [fit_camera(ctx.model.center, ctx.model.radius, v, options.width, options.height)
                         for v in options.views]
+            with ctx.timer("upload"):  # textures from the first level these views can sample
+                ctx.gpu = renderer.upload(ctx.model, ctx.cams)
+            result.notes += [n for n in ctx.model.notes if n not in result.notes]  # e.g. a format decoded on the CPU
             with ctx.timer("render"):
                 for cam in ctx.cams:
                     if "source" in selected:  # one pass for both when every material is OPAQUE

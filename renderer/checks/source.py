@@ -172,7 +172,7 @@ class SourceCheck(Check):
         gpu = None
         try:
             with ctx.timer("upload"):
-                gpu = renderer.upload(source)
+                gpu = renderer.upload(source, ctx.cams)  # drawn shaded by these views only
             for k, (cam, sil, a, img) in enumerate(zip(ctx.cams, ctx.coverage, ctx.front, ctx.shaded)):
                 with ctx.timer("render"):  # drawn as the build was (one pass when both are all OPAQUE)
                     if renderer.one_pass(gpu) == renderer.one_pass(ctx.gpu):
