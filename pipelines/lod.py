@@ -310,31 +310,50 @@ class _Estimator:
         rng = np.random.default_rng(self.rng_seed)
         return np.sort(rng.choice(ids, self.n, replace=False))
 
-    def __call__(self, cands: list[_Candidate]) -> list[float]:
+    def __call__(self, cands: list[_Candidate], lowest_of: Sequence[int] | None = None) -> list[float]:
+        """The estimate of every candidate. ``lowest_of``: only the lowest estimate among these
+        candidates is wanted (the others may get a lower value: the backward half alone); the
+        candidate with the lowest value and that value are the same as without it."""
         if not cands:
             return []
         from assetpipe.pipelines.surface_error import _Engine
 
         if self._engine is None:
             self._engine = _Engine(self.local, self.idx)
-        back, sizes, fwd = [], [], []
+        back, sizes, used_of = [], [], []
         for c in cands:
             tri = c[0]
             used = np.zeros(self.local.shape[0], bool)
             used[tri.reshape(-1)] = True
-            removed = self._subset(np.flatnonzero(self.used & ~used))
-            pts = np.concatenate([self.samples, self.local[removed]])
-            fwd.append(float(_Engine(self.local, tri.astype(np.int64)).query(pts)[0].max()))
+            used_of.append(used)
             # vertices shared with level 0 are on it (distance 0): only the others
             p = np.concatenate([sample_surface(self.local, tri, self.n, self.seed + 1),
                                 self.local[self._subset(np.flatnonzero(used & ~self.used))]])
             back.append(p)
             sizes.append(p.shape[0])
         d = self._engine.query(np.concatenate(back))[0]
-        out, start = [], 0
-        for f, k in zip(fwd, sizes):
-            out.append(max(f, float(d[start:start + k].max()) if k else 0.0))
+        bwd, start = [], 0
+        for k in sizes:
+            bwd.append(float(d[start:start + k].max()) if k else 0.0)
             start += k
+
+        def forward(i: int) -> float:
+            removed = self._subset(np.flatnonzero(self.used & ~used_of[i]))
+            pts = np.concatenate([self.samples, self.local[removed]])
+            return float(_Engine(self.local, cands[i][0].astype(np.int64)).query(pts)[0].max())
+
+        if lowest_of is None:
+            return [max(forward(i), bwd[i]) for i in range(len(cands))]
+        # the forward half (a BVH of the candidate and the level-0 samples) only where the
+        # backward half does not already exceed the lowest estimate found: a candidate whose
+        # lower value is above it cannot be the lowest (ties are computed: > only)
+        out = list(bwd)
+        best = math.inf
+        for i in sorted(lowest_of, key=lambda i: (bwd[i], i)):
+            if bwd[i] > best:
+                continue
+            out[i] = max(forward(i), bwd[i])
+            best = min(best, out[i])
         return out
 
 
@@ -440,9 +459,11 @@ def build_lod_chain(
             cands = [c for c in _unique(cands) if 0 < c[0].shape[0] <= max_allowed]
             if not cands:
                 break
-            errs = _measure(est, cands)
             slack = options.sloppy_slack * target
             within = [i for i, c in enumerate(cands) if c[0].shape[0] <= slack]
+            # with candidates within the slack, only the lowest estimate among them is used
+            errs = est(cands, within) if est is not None and len(cands) > 1 and within else \
+                _measure(est, cands)
             if within:
                 i = min(within, key=lambda i: (_cost(cands[i], errs[i]), cands[i][0].shape[0], i))
             else:

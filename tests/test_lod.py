@@ -368,3 +368,30 @@ def test_lock_fraction_validated():
     with pytest.raises(ConfigError, match="lock_fraction must be in"):
         LodOptions(lock_fraction=1.5)
     LodOptions(lock_fraction=0.0)  # off is allowed
+
+
+def test_estimator_lowest_of_keeps_the_lowest_candidate_and_its_value():
+    """Asked only for the lowest estimate among some candidates, the estimator skips the forward
+    half where the backward half alone already exceeds the lowest found: the same candidate
+    comes out lowest, with the same value; the others get at most their full value."""
+    from assetpipe.pipelines import simplify as simp
+    from assetpipe.pipelines.lod import _Estimator
+
+    v, f = _bumpy_sphere(4, seed=3)
+    local = (v - v.mean(0)) / np.linalg.norm(np.ptp(v, 0))
+    pos32 = np.ascontiguousarray(local, np.float32)
+    cands = []
+    for target in (f.shape[0] // 2, f.shape[0] // 3, f.shape[0] // 5, f.shape[0] // 9):
+        tri, err = simp.simplify(pos32, f, target)
+        cands.append((tri, err, False, 0))
+    est = _Estimator(local, f.astype(np.int64), 2000, 11)
+    full = est(cands)
+    assert len(set(full)) == len(full)  # distinct: the test can tell them apart
+    for lowest_of in ([0, 1, 2, 3], [1, 2, 3], [2, 3], [3, 0]):
+        part = est(cands, lowest_of)
+        i = min(lowest_of, key=lambda k: full[k])
+        assert min(lowest_of, key=lambda k: part[k]) == i and part[i] == full[i]
+        assert all(part[k] <= full[k] for k in range(len(cands)))
+    # the coarser candidates are worse by their backward half alone: their forward is skipped
+    part = est(cands, [0, 1, 2, 3])
+    assert sum(p < q for p, q in zip(part, full)) >= 1
