@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from numba import njit
 
 from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions  # noqa: F401 (re-exported)
 from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
@@ -588,22 +589,45 @@ def _normal_vectors(rgba: np.ndarray) -> np.ndarray:
 
 
 def _unit(w: np.ndarray) -> np.ndarray:
-    xyz = w[..., :3]
-    length = np.sqrt(np.einsum("...i,...i->...", xyz, xyz))
-    ok = length > 1e-12
-    out = np.empty_like(w)
-    np.divide(xyz, np.where(ok, length, 1.0)[..., None], out=out[..., :3])
-    if not ok.all():
-        out[~ok, :3] = (0.0, 0.0, 1.0)
-    out[..., 3] = w[..., 3]
-    return out
+    """(h, w, 4) float32 (x, y, z, alpha) -> xyz divided by its length (float32; a length at
+    most 1e-12 becomes +Z), alpha kept. Compiled (:func:`_unit_rows`): the numpy expression it
+    replaced, ``xyz / sqrt(einsum(xyz, xyz))``, took 0.51 s of the corpus's texture CPU;
+    tests/test_texture_mips.py holds the two equal, bit for bit."""
+    w = np.ascontiguousarray(w, np.float32)
+    return _unit_rows(w.reshape(-1, 4)).reshape(w.shape)
 
 
 def _encode_normals(u: np.ndarray) -> np.ndarray:
-    """(h, w, 4) float32 unit vectors + alpha -> uint8 RGBA (round to nearest)."""
-    out = np.empty(u.shape[:2] + (4,), dtype=np.uint8)
-    out[..., :3] = np.rint(np.clip((u[..., :3] + 1.0) * 127.5, 0.0, 255.0))
-    out[..., 3] = np.rint(np.clip(u[..., 3], 0.0, 1.0) * 255.0)
+    """(h, w, 4) float32 unit vectors + alpha -> uint8 RGBA (round to nearest):
+    ``rint(clip((xyz + 1) * 127.5, 0, 255))``, ``rint(clip(alpha, 0, 1) * 255)`` in float32
+    (compiled: :func:`_encode_rows`)."""
+    u = np.ascontiguousarray(u, np.float32)
+    return _encode_rows(u.reshape(-1, 4)).reshape(u.shape[:2] + (4,))
+
+
+@njit(cache=True, nogil=True)
+def _unit_rows(w):
+    out = np.empty_like(w)
+    tiny = np.float32(1e-12)
+    for i in range(w.shape[0]):
+        x, y, z = w[i, 0], w[i, 1], w[i, 2]
+        length = np.sqrt(x * x + y * y + z * z)
+        if length > tiny:
+            out[i, 0], out[i, 1], out[i, 2] = x / length, y / length, z / length
+        else:
+            out[i, 0], out[i, 1], out[i, 2] = np.float32(0.0), np.float32(0.0), np.float32(1.0)
+        out[i, 3] = w[i, 3]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _encode_rows(u):
+    out = np.empty(u.shape, np.uint8)
+    one, half, top, zero = np.float32(1.0), np.float32(127.5), np.float32(255.0), np.float32(0.0)
+    for i in range(u.shape[0]):
+        for c in range(3):
+            out[i, c] = np.uint8(np.rint(min(max((u[i, c] + one) * half, zero), top)))
+        out[i, 3] = np.uint8(np.rint(min(max(u[i, 3], zero), one) * top))
     return out
 
 

@@ -416,3 +416,36 @@ def test_dropping_levels_never_makes_a_working_copy_of_the_full_image(role):
     # level 0 alone is 2x (16-bit) or 4x (float32).
     working = (3000 * 3000 * (8 if role != ROLE_NORMAL else 16)) * 1.25
     assert after - before <= working + rgba / 12 + 64 * 2**20, (after - before) / rgba
+
+
+def test_compiled_normal_unit_and_encode_equal_the_numpy_expressions():
+    """_unit and _encode_normals are compiled; they equal, bit for bit, the numpy expressions
+    they replaced (random vectors, tiny and zero vectors, alpha outside [0, 1])."""
+    from assetpipe.pipelines.texture_mips import _encode_normals, _unit
+
+    def unit0(w):
+        xyz = w[..., :3]
+        length = np.sqrt(np.einsum("...i,...i->...", xyz, xyz))
+        ok = length > 1e-12
+        out = np.empty_like(w)
+        np.divide(xyz, np.where(ok, length, 1.0)[..., None], out=out[..., :3])
+        if not ok.all():
+            out[~ok, :3] = (0.0, 0.0, 1.0)
+        out[..., 3] = w[..., 3]
+        return out
+
+    def enc0(u):
+        out = np.empty(u.shape[:2] + (4,), dtype=np.uint8)
+        out[..., :3] = np.rint(np.clip((u[..., :3] + 1.0) * 127.5, 0.0, 255.0))
+        out[..., 3] = np.rint(np.clip(u[..., 3], 0.0, 1.0) * 255.0)
+        return out
+
+    rng = np.random.default_rng(5)
+    w = (rng.random((64, 48, 4)) * 2 - 1).astype(np.float32)
+    w[::7, ::5, :3] = 0
+    w[1::9, ::3, :3] *= np.float32(1e-7)
+    w[..., 3] = (rng.random((64, 48)) * 1.4 - 0.2).astype(np.float32)
+    a = unit0(w)
+    assert np.array_equal(a.view(np.uint32), _unit(w).view(np.uint32))
+    assert np.array_equal(enc0(a), _encode_normals(a))
+    assert np.array_equal(enc0(w), _encode_normals(w))
