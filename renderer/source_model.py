@@ -11,6 +11,7 @@ describe is drawn white.
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,9 @@ import numpy as np
 from assetpipe.core.errors import AssetError, MissingFileError
 
 from .loader import VK_FORMAT_R8G8B8A8_SRGB, VK_FORMAT_R8G8B8A8_UNORM, Lod, Material, Mesh, RenderModel, Texture
+
+#: threads decoding and mipping a source model's images (:func:`_make_textures`)
+TEXTURE_THREADS = min(4, os.cpu_count() or 1)
 
 
 def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
@@ -36,10 +40,45 @@ def _rgba_of(image: Any, decoded: dict[str, Any] | None) -> np.ndarray:
     return np.asarray(image.convert("RGBA"), np.uint8)
 
 
+def _source_texture(img: Any, role: str, name: str, decoded: dict[str, Any] | None) -> Texture:
+    """The source image of ``role`` with a mip chain of its own (:mod:`renderer.ref_mips`)."""
+    from .ref_mips import mip_chain  # noqa: PLC0415
+
+    fmt = VK_FORMAT_R8G8B8A8_SRGB if role in ("baseColor", "emissive") else VK_FORMAT_R8G8B8A8_UNORM
+    return Texture(name=f"{name} source {role}", levels=mip_chain(_rgba_of(img, decoded), role),
+                   vk_format=fmt, sampler={"minFilter": 9987}, from_ktx2=False)
+
+
+def _make_textures(pending: list[tuple], images: dict, decoded: dict[str, Any] | None) -> None:
+    """Decode and mip the images a planning pass of :func:`_material_of` asked for, on up to
+    :data:`TEXTURE_THREADS` threads (OpenCV's decoders and filters release the GIL), into
+    ``images`` by key. One that fails is left out: the drawing pass then tries it again and
+    notes why it is not usable."""
+    todo: dict[Any, tuple] = {}
+    for key, img, role, name in pending:
+        todo.setdefault(key, (img, role, name))
+    if len(todo) < 2:
+        return  # nothing to do side by side: the drawing pass makes it
+
+    def make(item: tuple) -> Texture | None:
+        try:
+            return _source_texture(*item, decoded)
+        except Exception:  # noqa: BLE001 - reported by the drawing pass
+            return None
+
+    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+    with ThreadPoolExecutor(max_workers=min(TEXTURE_THREADS, len(todo))) as pool:
+        made = list(pool.map(make, todo.values()))
+    for key, tex in zip(todo, made):
+        if tex is not None:
+            images[key] = tex
+
+
 def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Texture] | None = None,
                  decoded: dict[str, Any] | None = None, skip_roles: set[str] | None = None,
                  sampler_of: dict[str, dict[str, dict[str, Any]]] | None = None,
-                 uv1_roles: set[str] | None = None,
+                 uv1_roles: set[str] | None = None, pending: list[tuple] | None = None,
                  ) -> tuple[Material, np.ndarray | None, np.ndarray | None]:
     """(material, uv (N,2) top-left origin or None, vertex colours (N,4) or None) of a trimesh geometry.
     Every texture role trimesh reads is drawn (on TEXCOORD_0, the only UV set trimesh reads; those
@@ -106,12 +145,11 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
         if images is not None and key in images:  # type: ignore[operator]
             tex = images[key]  # type: ignore[index]
             return dataclasses.replace(tex, sampler=sampler) if sampler else tex
+        if pending is not None:  # planning pass: made first, in parallel (_make_textures)
+            pending.append((key, img, role, name))
+            return None
         try:
-            from .ref_mips import mip_chain  # noqa: PLC0415
-
-            fmt = VK_FORMAT_R8G8B8A8_SRGB if role in ("baseColor", "emissive") else VK_FORMAT_R8G8B8A8_UNORM
-            tex = Texture(name=f"{name} source {role}", levels=mip_chain(_rgba_of(img, decoded), role),
-                          vk_format=fmt, sampler={"minFilter": 9987}, from_ktx2=False)
+            tex = _source_texture(img, role, name, decoded)
         except Exception as exc:  # noqa: BLE001
             notes.append(f"{name}: source {role} image not usable ({exc})")
             return None
@@ -187,6 +225,14 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
         notes.append(f"the source samples {sorted(skip)} from a UV set other than TEXCOORD_0 (trimesh reads "
                      "TEXCOORD_0 only) and TEXCOORD_1 (read by the reference where every material samples the "
                      "role there with the base colour on TEXCOORD_0): not drawn")
+    if not flat and TEXTURE_THREADS > 1:  # the textures every material will draw, made side by side first
+        pending: list[tuple] = []
+        planned: set[str] = set()
+        for k, (_, gname, g) in enumerate(instances):
+            if gname not in planned:
+                planned.add(gname)
+                _material_of(g, f"source-{k}", [], image_cache, decoded, skip, samplers, on_uv1, pending)
+        _make_textures(pending, image_cache, decoded)
     base = first = 0
     for k, (transform, gname, g) in enumerate(instances):
         v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]

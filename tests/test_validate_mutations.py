@@ -234,3 +234,28 @@ def test_a_role_on_a_uv_set_the_layout_lacks_is_named(built: Path) -> None:
                "does not carry" in n for n in r.notes), r.notes
     assert any("['occlusion'] on TEXCOORD_1 drawn on neither side" in c
                for c in r.check("source").figures.get("caveats", [])), r.check("source").figures
+
+
+def test_source_textures_made_side_by_side_are_the_same(built: Path, monkeypatch) -> None:
+    """The reference's images are decoded and mipped on TEXTURE_THREADS threads before the
+    materials are assembled: the same materials, levels and notes as one at a time."""
+    from assetpipe.renderer import source_model
+
+    src = built / "src" / "pbr.glb"
+    models = []
+    for threads in (1, 4):
+        monkeypatch.setattr(source_model, "TEXTURE_THREADS", threads)
+        models.append(source_model.load_source_model(src, decoded={}))
+    a, b = models
+    assert a.notes == b.notes and len(a.materials) == len(b.materials) == 1
+    roles = ("texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture", "emissive_texture")
+    drawn = 0
+    for ma, mb in zip(a.materials, b.materials):
+        for role in roles:
+            ta, tb = getattr(ma, role), getattr(mb, role)
+            assert (ta is None) == (tb is None)
+            if ta is not None:
+                drawn += 1
+                assert ta.name == tb.name and ta.vk_format == tb.vk_format and ta.sampler == tb.sampler
+                assert [lv.tobytes() for lv in ta.levels] == [lv.tobytes() for lv in tb.levels]
+    assert drawn >= 4  # base colour, normal, metallic-roughness, emissive (occlusion is on TEXCOORD_1)
