@@ -193,10 +193,12 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
 # -- LOD ------------------------------------------------------------------------------------
 
 def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None,
-             double_sided: list[bool] | None = None) -> dict:
+             double_sided: list[bool] | None = None, threads: int | None = None) -> dict:
     """LOD chains of a model (pipelines/lod_model.py): meshes sharing a material and format
     merged, duplicate triangles dropped, affine copies simplified once, vertices reordered so
-    that coarser levels use a prefix. ``double_sided[i]``: mesh i's material is double-sided."""
+    that coarser levels use a prefix. ``double_sided[i]``: mesh i's material is double-sided.
+    ``threads``: at most this many of the model's meshes measured at once (the build's ``-j``;
+    None: ``LOD_THREADS``); the result does not depend on it."""
     from assetpipe.pipelines.lod import LodOptions
     from assetpipe.pipelines.lod_model import LodPart, build_model_lods
     from assetpipe.pipelines.mesh_process import ATTRIBUTE_COMPONENTS
@@ -235,7 +237,7 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
                                  normals=normals, others=others, exact=exact,
                                  group_key=(m["material"], bool(m.get("hasUv"))),
                                  double_sided=bool(double_sided[i]) if double_sided else False))
-        for j, lm in enumerate(build_model_lods(parts, opts)):
+        for j, lm in enumerate(build_model_lods(parts, opts, threads=threads)):
             ms = [meta["meshes"][i] for i in lm.parts]
             out_arrays[f"{j}.vertices"] = lm.vertices
             levels_meta = []

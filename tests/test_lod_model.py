@@ -251,9 +251,32 @@ def test_threads_do_not_change_the_chains(monkeypatch):
     for threads in (1, 3):
         monkeypatch.setattr(lod_model, "LOD_THREADS", threads)
         runs.append(build_model_lods(parts, FAST))
-    assert len(runs[0]) == len(runs[1]) == 5
-    for a, b in zip(*runs):
+    runs.append(build_model_lods(parts, FAST, threads=2))  # the build's -j, passed down
+    assert len(runs[0]) == len(runs[1]) == len(runs[2]) == 5
+    for a, b in [*zip(runs[0], runs[1]), *zip(runs[0], runs[2])]:
         assert a.vertices.tobytes() == b.vertices.tobytes()
         assert [lv.indices.tobytes() for lv in a.levels] == [lv.indices.tobytes() for lv in b.levels]
         assert [(lv.hausdorff, lv.rms) for lv in a.levels] == [(lv.hausdorff, lv.rms) for lv in b.levels]
         assert len(a.levels) > 1
+
+
+def test_the_build_measures_on_as_many_threads_as_jobs(monkeypatch, tmp_path):
+    """-j 1 keeps a model's LOD measurement on one thread (the user's limit); -j N allows N."""
+    import assetpipe.pipelines.lod_model as lod_model
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+
+    seen = []
+    real = lod_model.build_model_lods
+
+    def spy(parts, options=lod_model.DEFAULT_LOD_OPTIONS, threads=None):
+        seen.append(threads)
+        return real(parts, options, threads=threads)
+
+    monkeypatch.setattr(lod_model, "build_model_lods", spy)
+    v, f = _bumpy_sphere(2)
+    obj = tmp_path / "ball.obj"
+    obj.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in v)
+                   + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f))
+    report = run_build([obj], tmp_path / "out", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache")
+    assert report.counts() == {"built": 1} and seen == [1]
