@@ -43,7 +43,9 @@ def write_sphere_obj(path: Path, n_lat: int = 16, n_lon: int = 32) -> int:
 def built(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("api")
     n_tris = write_sphere_obj(tmp / "ball.obj")
-    report = assetpipe.build([EXAMPLES, tmp / "ball.obj"], tmp / "out", jobs=1)
+    # a cache of its own: the session's shared cache may already hold the examples (built by
+    # tests that ran first), and this report is asserted to have built all three
+    report = assetpipe.build([EXAMPLES, tmp / "ball.obj"], tmp / "out", jobs=1, cache_dir=tmp / "cache")
     return tmp, report, n_tris
 
 
