@@ -229,8 +229,9 @@ def decode_vertex_arrays(raw: bytes, layout: dict[str, Any], where: Path,
 
 
 def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_path: str,
-                  notes: list[str]) -> Texture | None:
-    """The base-colour texture: its KTX2 (all levels), else level 0 of ``texturePath``."""
+                  notes: list[str], parsed: dict[Path, Any] | None = None) -> Texture | None:
+    """The base-colour texture: its KTX2 (all levels), else level 0 of ``texturePath``.
+    ``parsed``: receives each KTX2 read, by path (for the checks, which then need not read it)."""
     sampler = dict(tex.get("sampler") or {}) if tex else {}
     ktx_rel = tex.get("ktx2") if tex else None
     if ktx_rel:
@@ -241,6 +242,8 @@ def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_p
             img = read_ktx2(ktx_path.read_bytes())
         except Exception as exc:  # noqa: BLE001 - any reader failure is a bad texture
             raise InvalidTextureError(ktx_path, f"cannot read KTX2: {exc}") from exc
+        if parsed is not None:
+            parsed[ktx_path] = img
         levels = [np.ascontiguousarray(lv, np.uint8) for lv in img.levels]
         if not levels:
             raise InvalidTextureError(ktx_path, "KTX2 has no levels")
@@ -299,7 +302,8 @@ def role_uv_slot(side_mat: dict[str, Any], role: str, layout_names: set[str]) ->
 
 def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: str,
                        notes: list[str], loaded: dict[tuple, Texture | None] | None = None,
-                       layout_names: set[str] | None = None) -> tuple[Texture | None, int]:
+                       layout_names: set[str] | None = None,
+                       parsed: dict[Path, Any] | None = None) -> tuple[Texture | None, int]:
     """(the material's texture in ``role`` (its KTX2, else level 0 of its image), the UV slot it
     samples (:func:`role_uv_slot`)); no texture when the build does not carry its UV set (a note
     says which role and why). ``loaded``: the model's textures read so far, by file and sampler (a
@@ -316,7 +320,7 @@ def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: 
            DRAWN_ROLES[role])
     if loaded is not None and key in loaded:
         return loaded[key], slot
-    out = _load_texture(root, mat_id, tex, "", notes)
+    out = _load_texture(root, mat_id, tex, "", notes, parsed)
     if out is not None and not out.from_ktx2:
         out.vk_format = DRAWN_ROLES[role]
     if loaded is not None:
@@ -324,8 +328,10 @@ def _load_role_texture(root: Path, mat_id: str, side_mat: dict[str, Any], role: 
     return out, slot
 
 
-def load_built_model(model_json: Path, load_textures: bool = True) -> RenderModel:
-    """Read and check a built model; raises an :class:`AssetError` subclass naming the problem."""
+def load_built_model(model_json: Path, load_textures: bool = True,
+                     parsed: dict[Path, Any] | None = None) -> RenderModel:
+    """Read and check a built model; raises an :class:`AssetError` subclass naming the problem.
+    ``parsed``: receives every KTX2 read, by path (the validator's checks reuse them)."""
     model_json = Path(model_json)
     root = model_json.parent
     seed = _read_json(model_json)
@@ -369,8 +375,10 @@ def load_built_model(model_json: Path, load_textures: bool = True) -> RenderMode
             notes.append(f"material {mid} is not in the sidecar: drawn opaque, single-sided")
         color = m.get("color") or sm.get("baseColorFactor") or [1, 1, 1, 1]
         tex = (sm.get("textures") or {}).get("baseColor")
-        texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes) if load_textures else None
-        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded if r != "normal" else None, layout_names)
+        texture = _load_texture(root, mid, tex, str(m.get("texturePath") or ""), notes,
+                                parsed) if load_textures else None
+        roles = {r: _load_role_texture(root, mid, sm, r, notes, loaded if r != "normal" else None, layout_names,
+                                       parsed)
                  if load_textures else (None, 0) for r in ("normal", "metallicRoughness", "occlusion", "emissive")}
         mat_index[mid] = len(materials)
         materials.append(Material(id=mid, base_color=tuple(float(c) for c in color[:4]),  # type: ignore[arg-type]

@@ -20,6 +20,7 @@ from assetpipe.core.errors import AssetpipeError
 from . import compare
 from .camera import fit_camera
 from .checks import NAMES, REGISTRY, Context
+from .checks.ktx2_levels import Ktx2Levels, ktx2_cache_key
 from .checks.source import find_source, start_source
 from .checks.textures import SRGB_ROLES
 from .loader import load_built_model
@@ -29,6 +30,10 @@ CHECKS = NAMES
 
 __all__ = ["CHECKS", "DEFAULT_VIEWS", "SRGB_ROLES", "CheckResult", "ValidateOptions", "ValidationResult",
            "find_source", "run_checks"]
+
+
+#: the checks that read the source model (:func:`renderer.checks.source.load_source`)
+SOURCE_READERS = frozenset({"source", "uvs"})
 
 
 def _selected(options: ValidateOptions) -> set[str]:
@@ -45,15 +50,18 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
     selected = _selected(options)
     t0 = time.perf_counter()
     try:
+        parsed: dict[Path, Any] = {}
         with ctx.timer("load"):
-            ctx.model = load_built_model(model_json)
+            ctx.model = load_built_model(model_json, parsed=parsed)
+        for path, image in parsed.items():  # the texture checks read these KTX2 files too
+            ctx.cache[ktx2_cache_key(path)] = Ktx2Levels(name=str(path), image=image)
         result.id = ctx.model.id
         result.notes += ctx.model.notes
     except AssetpipeError as exc:
         ctx.load_error = str(exc)
     load_seconds = time.perf_counter() - t0
     drawable = ctx.model is not None and ctx.model.triangles(0) > 0
-    if ctx.model is not None and selected & {"source", "uvs"}:
+    if ctx.model is not None and selected & SOURCE_READERS:
         start_source(ctx)  # read on its own thread while the build is uploaded and drawn
     wants_render = any(c.needs_render and c.name in selected for c in REGISTRY)
     results: dict[str, CheckResult] = {}
@@ -73,7 +81,9 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
                         facing = renderer.render(ctx.gpu, cam, mode="facing")
                     ctx.coverage.append(compare.coverage(facing))
                     ctx.front.append(compare.front(facing))
-        for check in REGISTRY:
+        # the checks that read the source model last: it is read on its own thread meanwhile
+        # (the report lists the checks in REGISTRY order whatever order they ran in)
+        for check in sorted(REGISTRY, key=lambda c: c.name in SOURCE_READERS):
             if check.name not in selected or check.name == "vulkan":
                 continue
             c0 = time.perf_counter()

@@ -7,16 +7,30 @@ from __future__ import annotations
 
 import hashlib
 import io
+import threading
 from typing import Any
 
 import numpy as np
 
 
 def decode_rgba(data: bytes, cache: dict[str, Any] | None = None) -> np.ndarray:
-    """(H, W, 4) uint8 RGBA of PNG/JPEG/... ``data`` (16-bit images rounded to 8 bits)."""
+    """(H, W, 4) uint8 RGBA of PNG/JPEG/... ``data`` (16-bit images rounded to 8 bits).
+
+    With ``cache``, each image is decoded once even when two threads ask for it at once (the
+    source model's thread and the texture checks: a lock per image, kept in the cache); other
+    images decode side by side."""
     key = "img:" + hashlib.blake2b(data, digest_size=16).hexdigest()
-    if cache is not None and key in cache:
+    if cache is None:
+        return _decode(data)
+    if key in cache:
         return cache[key]
+    with cache.setdefault("lock:" + key, threading.Lock()):  # setdefault: one lock, atomically
+        if key not in cache:
+            cache[key] = _decode(data)
+    return cache[key]
+
+
+def _decode(data: bytes) -> np.ndarray:
     out = None
     if data[:8] != b"\x89PNG\r\n\x1a\n" or b"PLTE" not in data[:4096]:  # palettes: Pillow handles tRNS right
         import cv2  # noqa: PLC0415
@@ -37,6 +51,4 @@ def decode_rgba(data: bytes, cache: dict[str, Any] | None = None) -> np.ndarray:
 
         with Image.open(io.BytesIO(data)) as im:
             out = np.asarray(im.convert("RGBA"))
-    if cache is not None:
-        cache[key] = out
     return out

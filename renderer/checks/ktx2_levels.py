@@ -76,10 +76,15 @@ class Ktx2Levels:
                     self.count - 1)
 
 
+def ktx2_cache_key(path: Path) -> str:
+    """The key of the KTX2 at ``path`` in a validation's per-model cache."""
+    return f"ktx2:{Path(path).resolve()}"
+
+
 def open_ktx2(path: Path, cache: dict[str, Any] | None = None) -> Ktx2Levels:
     """The KTX2 at ``path``, parsed once per ``cache``. Raises OSError when it cannot be read and
     whatever the project's reader raises when it does not parse (neither is cached)."""
-    key = f"ktx2:{Path(path).resolve()}"
+    key = ktx2_cache_key(path)
     if cache is not None and key in cache:
         return cache[key]
     out = Ktx2Levels(name=str(path), image=read_ktx2(Path(path).read_bytes()))
