@@ -153,6 +153,9 @@ class RolesCheck(Check):
         doc, blob = parsed
         src_mats = doc.get("materials") or []
         figures: dict[str, Any] = {}
+        # one reduction per image, size and filter: a packed occlusion-roughness-metallic image
+        # serves two roles (decode_rgba gives the same array for the same bytes)
+        reduced: dict[tuple, np.ndarray] = {}
         for mat in model.sidecar.get("materials", []):
             mid = str(mat.get("id", ""))
             tail = mid.rsplit("-mat-", 1)
@@ -191,7 +194,11 @@ class RolesCheck(Check):
                             # plus the encoders' own error, as the textures check allows for level 0
                             tol += ctx.options.texture_compressed_png_tolerance - ctx.options.texture_png_tolerance
                         rgba = decode_rgba(raw, ctx.cache)
-                        ref = _reduce(rgba, (lv.shape[1], lv.shape[0]), role, 43 if ktx.srgb else 37)
+                        fmt = 43 if ktx.srgb else 37
+                        rkey = (id(rgba), lv.shape[1], lv.shape[0], role == "normal", fmt)
+                        if rkey not in reduced:
+                            reduced[rkey] = _reduce(rgba, (lv.shape[1], lv.shape[0]), role, fmt)
+                        ref = reduced[rkey]
                         d = float(np.abs(ref[..., :n] - lv[..., :n].astype(np.float32)).mean()) / 255.0
                 except Exception as exc:  # noqa: BLE001 - the textures check reports unreadable KTX2s
                     figures[key] = {"error": str(exc)[:200]}
