@@ -217,8 +217,8 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
                      threads: int | None = None) -> list[LodMesh]:
     """LOD chains for a model's meshes (see the module docstring). Returns the output meshes
     in order of their first part; parts with no triangles are never merged (kept alone).
-    ``threads``: distinct meshes measured at once, at most (None: :data:`LOD_THREADS`); the
-    result does not depend on it."""
+    ``threads``: distinct meshes measured at once, at most (None: :data:`LOD_THREADS`, which
+    also caps it); the result does not depend on it."""
     keys = [(p.group_key, p.double_sided, p.uv is not None, p.normals is not None, len(p.others))
             if p.indices.size else ("empty", i) for i, p in enumerate(parts)]
     groups = merge_groups(keys, options.merge_meshes)
@@ -249,7 +249,8 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
     # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
     # kernels release the GIL); each chain is a pure function of its mesh, so the result does
     # not depend on the thread count or order
-    threads = min(LOD_THREADS if threads is None else max(1, int(threads)), len(distinct))
+    # never more than LOD_THREADS (the cores, at most 4): -j 8 on 2 cores is 8 processes already
+    threads = min(LOD_THREADS, max(1, int(threads)) if threads is not None else LOD_THREADS, len(distinct))
     if threads > 1:
         distinct.sort(key=lambda i: -merged[i][3].shape[0])
         with ThreadPoolExecutor(max_workers=threads) as pool:

@@ -173,13 +173,14 @@ class LodOptions:
 
     def samples_for(self, triangles: int) -> int:
         """Area samples per side for estimating a mesh of ``triangles`` triangles."""
-        wanted = max(self.error_samples_min, int(self.error_samples_per_triangle * triangles))
-        return min(self.error_samples, wanted)
+        return self._samples(self.error_samples_min, self.error_samples_per_triangle, triangles)
 
     def bound_samples_for(self, triangles: int) -> int:
         """Area samples per side for the recorded (bounded) measurement."""
-        wanted = max(self.bound_samples_min, int(self.bound_samples_per_triangle * triangles))
-        return min(self.error_samples, wanted)
+        return self._samples(self.bound_samples_min, self.bound_samples_per_triangle, triangles)
+
+    def _samples(self, least: int, per_triangle: float, triangles: int) -> int:
+        return min(self.error_samples, max(least, int(per_triangle * triangles)))
 
     def pixels_per_unit_at_unit_distance(self) -> float:
         """(resolution / 2) / tan(fov / 2): a length L at distance d covers L * this / d px."""

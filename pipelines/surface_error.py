@@ -344,8 +344,8 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         if not v.shape[0]:
             break
         if PAIR_FIRST:
-            others = np.ascontiguousarray(np.stack([f[:, 0], f[:, 1], f[:, 2]], 1))
-            ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded[1]))
+            ub = np.minimum(ub, pair_bound(v, hint, np.ascontiguousarray(f), eng.a, eng.b, eng.c,
+                                           target.welded[1]))
             settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
             if not v.shape[0]:
                 break

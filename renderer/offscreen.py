@@ -668,7 +668,5 @@ def _from_level(t: Texture, first: int) -> Texture:
     """``t`` without its ``first`` finest levels (level ``first`` becomes level 0)."""
     if first <= 0:
         return t
-    import dataclasses  # noqa: PLC0415
-
     return dataclasses.replace(t, levels=list(t.levels[first:]),
                                size=t.level_size(first) if t.size is not None else None)
