@@ -293,16 +293,19 @@ class _Estimator:
     value of the true distance; the recorded error of the chosen level is the bound of
     :func:`measure_levels`, computed once per emitted level. Choosing by the bound instead
     doubled the measuring time of chain="best" (Duck, 5 levels: 12.4 s against 6.5 s
-    chained, under load). Level 0's BVH is built once and kept for every call."""
+    chained, under load). Level 0's BVH is built once and kept for every call; ``engine``
+    passes one already built over ``local`` and ``idx`` (the recorded bound's reference, whose
+    frame the estimator then shares)."""
 
-    def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int) -> None:
+    def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int,
+                 engine=None) -> None:
         self.local, self.idx, self.n, self.seed = local, idx, n, seed
         used = np.zeros(local.shape[0], bool)
         used[idx.reshape(-1)] = True
         self.used = used
         self.samples = sample_surface(local, idx, n, seed)
         self.rng_seed = seed + 7
-        self._engine = None
+        self._engine = engine
 
     def _subset(self, ids: np.ndarray) -> np.ndarray:
         if ids.shape[0] <= self.n:
@@ -420,10 +423,15 @@ def build_lod_chain(
                                      options.weld_normal_seams)
     # Candidates are compared by a quick sampled estimate; the chosen levels are measured
     # (bounded) against the reference at the end, in one batch.
-    est = None
+    # The reference of the recorded bound is prepared first: the estimator works in its frame
+    # (within rounding of ``local``) and shares its level-0 BVH, and the estimates of the
+    # chosen levels (distances evaluated between the level and level 0) start their bounds.
+    est = ref = None
     if options.measure and m0 > 0:
-        est = _Estimator(local, idx.astype(np.int64), min(options.samples_for(m0), ESTIMATE_SAMPLES),
-                         options.error_seed + 101)
+        ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0),
+                                seed=options.error_seed)
+        est = _Estimator(ref.positions, ref.indices, min(options.samples_for(m0), ESTIMATE_SAMPLES),
+                         options.error_seed + 101, engine=ref.side.engine)
     error_targets = options.error_targets()
     chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
     direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"
@@ -482,9 +490,9 @@ def build_lod_chain(
 
     # --- measure every chosen level against level 0 (one prepared reference, one batch)
     measured: list[SurfaceError | None] = [None] * len(chosen)
-    if est is not None and len(chosen) > 1:
-        ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0), seed=options.error_seed)
-        measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]])
+    if ref is not None and len(chosen) > 1:
+        measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]],
+                                      lower=[c[1] for c in chosen[1:]])
         for k in range(1, len(chosen)):
             target = error_targets[k] if error_targets is not None else math.inf
             if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):

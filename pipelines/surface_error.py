@@ -549,7 +549,8 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
 
 
 def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
-             work_per_triangle: float | None = None) -> list[SurfaceError]:
+             work_per_triangle: float | None = None,
+             lower: Sequence[float | None] | None = None) -> list[SurfaceError]:
     if work_per_triangle is None:
         work_per_triangle = DEFAULT_WORK_PER_TRIANGLE
     """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices)."""
@@ -568,15 +569,17 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
         # reference -> mesh: what the simplification lost
         work = int(min(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]),
                        DEFAULT_WORK_MAX))
+        known = lower[i] if lower is not None else None
+        known = float(known) if known is not None and math.isfinite(known) else 0.0
         fwd, f_ms = _direction(ref.side, side, used if shared else None, ref.samples,
-                               ref.tolerance, work)
+                               ref.tolerance, work, known)
         # mesh -> reference: what it added
         s = sample_surface(local, tri, ref.n_samples, ref.seed + 1)
         # (the forward direction's lower value settles what cannot exceed it by the tolerance)
         bwd, b_ms = _direction(side, ref.side, ref.vertex_used if shared else None, s,
-                               ref.tolerance, work, fwd.lower)
+                               ref.tolerance, work, max(fwd.lower, known))
         h = max(fwd.upper, bwd.upper)
-        lo = max(fwd.lower, bwd.lower)
+        lo = max(fwd.lower, bwd.lower, known)
         r = math.sqrt(0.5 * (f_ms + b_ms))
         results.append(SurfaceError(
             h * ref.scale, r * ref.scale, h, r, fwd.upper, bwd.upper, lo * ref.scale, lo,
@@ -603,7 +606,8 @@ def measure_against(
     return _measure(ref, prepared)
 
 
-def measure_levels(ref: Reference, levels: Sequence[np.ndarray]) -> list[SurfaceError]:
+def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
+                   lower: Sequence[float | None] | None = None) -> list[SurfaceError]:
     """Measure index buffers over the reference's *own* vertex array (LOD levels).
 
     Args: ref from :func:`prepare_reference`; levels: (K, 3) int arrays indexing the
@@ -613,7 +617,7 @@ def measure_levels(ref: Reference, levels: Sequence[np.ndarray]) -> list[Surface
     """
     prepared = [(ref.positions, np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64), True)
                 for l in levels]
-    return _measure(ref, prepared)
+    return _measure(ref, prepared, lower=lower)
 
 
 def measure_error(

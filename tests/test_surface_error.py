@@ -121,6 +121,26 @@ def test_shared_vertex_levels_match_general_path():
     assert fast.rms == pytest.approx(slow.rms, rel=1e-12)  # same samples, exact distances
 
 
+def test_known_lower_value_seeds_the_bound():
+    """A distance already evaluated between the level and the reference (the LOD estimator's)
+    starts the bound: it is still a bound of the dense-sample value, it reports the seed as
+    evaluated (the truth lies between), and it is within the tolerance of the seed."""
+    pos, tri = _grid(14, z=lambda x, y: 0.08 * np.sin(7 * x) * np.cos(5 * y))
+    sub = tri[::3]
+    ref = prepare_reference(pos, tri, samples=2000)
+    plain = measure_levels(ref, [sub])[0]
+    dense = _dense(pos, tri, pos, sub, 100_000)
+    # the largest distance the plain bound evaluated: a real distance between the two
+    seed = plain.hausdorff_lower_rel
+    seeded = measure_levels(ref, [sub], lower=[seed])[0]
+    assert seeded.hausdorff >= dense
+    assert seeded.hausdorff_lower_rel >= seed
+    assert seeded.hausdorff_rel <= (1 + DEFAULT_TOLERANCE) * seeded.hausdorff_lower_rel
+    # None and NaN (no estimate) are the plain measurement
+    assert measure_levels(ref, [sub], lower=[None])[0] == plain
+    assert measure_levels(ref, [sub], lower=[float("nan")])[0] == plain
+
+
 def test_empty_meshes():
     pos, tri = _grid(2)
     empty = np.zeros((0, 3), np.uint32)
