@@ -59,7 +59,7 @@ def mip_chain(rgba: np.ndarray, role: str) -> list[np.ndarray]:
         elif role == "normal":
             lv = _normal8(cur.reshape(-1, 4)).reshape(cur.shape)
         else:
-            lv = np.rint(cur / 257.0).astype(np.uint8)
+            lv = _data8(cur.reshape(-1)).reshape(cur.shape)
         out.append(np.ascontiguousarray(lv))
     return out
 
@@ -76,6 +76,17 @@ def _colour8(cur, table):
         for c in range(3):
             out[i, c] = table[cur[i, c]]
         out[i, 3] = np.uint8(np.rint(np.float64(cur[i, 3]) / 257.0))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _data8(cur):
+    """(P,) uint16 -> (P,) uint8 ``rint(x / 257)`` in integers: ``x / 257`` is never a half
+    (257 is odd), so the nearest integer is ``floor((2x + 257) / 514)`` exactly. The numpy
+    expression took 0.3 s on a 2048^2 level (float64 temporaries)."""
+    out = np.empty(cur.shape, np.uint8)
+    for i in range(cur.shape[0]):
+        out[i] = np.uint8((np.int64(cur[i]) * 2 + 257) // 514)
     return out
 
 
@@ -107,3 +118,4 @@ def warm() -> None:
     tiny = np.zeros((1, 4), np.uint16)
     _colour8(tiny, LIN16_TO_SRGB8)
     _normal8(tiny)
+    _data8(tiny.reshape(-1))

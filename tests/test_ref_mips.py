@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from assetpipe.renderer.ref_mips import LIN16_TO_SRGB8, SRGB8_TO_LIN16, _colour8, _normal8, level_count, mip_chain
+from assetpipe.renderer.ref_mips import (
+    LIN16_TO_SRGB8, SRGB8_TO_LIN16, _colour8, _data8, _normal8, level_count, mip_chain)
 
 
 def _cases():
@@ -40,6 +41,11 @@ def test_normal_rounding_is_the_numpy_expression(case):
     want[..., 3] = np.rint(cur[..., 3] / 257.0)
     got = _normal8(cur.reshape(-1, 4)).reshape(cur.shape)
     assert np.array_equal(got, want)
+
+
+def test_data_rounding_is_the_numpy_expression():
+    every = np.arange(65536, dtype=np.uint16)  # all values: the integer form is exact
+    assert np.array_equal(_data8(every), np.rint(every / 257.0).astype(np.uint8))
 
 
 def test_chain_sizes_and_colour_averaging_in_linear_light():
