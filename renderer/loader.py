@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from assetpipe.core.errors import AssetError, InvalidGeometryError, InvalidTextureError, MissingFileError
+from assetpipe.core.errors import (
+    AssetError, AssetpipeError, InvalidGeometryError, InvalidTextureError, MissingFileError)
 
 VK_FORMAT_R8G8B8A8_UNORM = 37
 VK_FORMAT_R8G8B8A8_SRGB = 43
@@ -43,11 +44,18 @@ _FORMATS: dict[str, tuple[np.dtype, int, float | None]] = {
 }
 
 
-def read_ktx2(data: bytes) -> Any:
+def read_ktx2(data: Any, copy: bool = True) -> Any:
     """The project's KTX2 reader (``assetpipe.core.ktx2.read_ktx2``): .vk_format, .width, .height, .levels."""
     from assetpipe.core.ktx2 import read_ktx2 as project_reader  # noqa: PLC0415
 
-    return project_reader(data)
+    return project_reader(data, copy=copy)
+
+
+def map_file(path: Path) -> Any:
+    """``assetpipe.core.ktx2.map_file``: a large file mapped read-only, a small one read."""
+    from assetpipe.core.ktx2 import map_file as project_map  # noqa: PLC0415
+
+    return project_map(path)
 
 
 @dataclass
@@ -168,6 +176,16 @@ def _read_json(path: Path) -> Any:
         raise AssetError(path, f"not valid JSON: {exc}") from exc
 
 
+def read_sidecar(model_json: Path) -> dict[str, Any] | None:
+    """The sidecar of a built model as a dict, or None when it is missing or not a JSON object
+    (:func:`load_built_model` says what is wrong with it)."""
+    try:
+        side = _read_json(sidecar_path(model_json))
+    except (AssetpipeError, OSError):
+        return None
+    return side if isinstance(side, dict) else None
+
+
 def sidecar_path(model_json: Path) -> Path:
     """``ID.asset.json`` beside ``ID.json``."""
     p = Path(model_json)
@@ -239,7 +257,9 @@ def _load_texture(root: Path, mat_id: str, tex: dict[str, Any] | None, texture_p
         if not ktx_path.is_file():
             raise MissingFileError(ktx_path, f"KTX2 texture of material {mat_id} is missing")
         try:
-            img = read_ktx2(ktx_path.read_bytes())
+            # mapped, not copied: the upload reads the levels the views can sample, the checks
+            # sample the rest (a 4096^2 chain is 89 MB)
+            img = read_ktx2(map_file(ktx_path), copy=False)
         except Exception as exc:  # noqa: BLE001 - any reader failure is a bad texture
             raise InvalidTextureError(ktx_path, f"cannot read KTX2: {exc}") from exc
         if parsed is not None:

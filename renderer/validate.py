@@ -23,7 +23,7 @@ from .checks import NAMES, REGISTRY, Context
 from .checks.ktx2_levels import Ktx2Levels, ktx2_cache_key
 from .checks.source import find_source, start_source
 from .checks.textures import SRGB_ROLES
-from .loader import load_built_model
+from .loader import load_built_model, read_sidecar
 from .results import DEFAULT_VIEWS, CheckResult, ValidateOptions, ValidationResult
 
 CHECKS = NAMES
@@ -40,6 +40,19 @@ def _selected(options: ValidateOptions) -> set[str]:
     return set(options.checks) if options.checks else set(NAMES)
 
 
+def _run_one(check: Any, ctx: Context, drawable: bool, load_seconds: float) -> CheckResult:
+    """One check's result (a skip when what it needs is missing), with its seconds."""
+    c0 = time.perf_counter()
+    if check.name != "load" and check.name != "textures" and ctx.model is None:
+        res = CheckResult(check.name, "skip", messages=["the built files did not load"])
+    elif check.needs_render and not drawable:
+        res = CheckResult(check.name, "skip", messages=["the model has no triangles to draw"])
+    else:
+        res = check.run(ctx)
+    res.seconds = time.perf_counter() - c0 + (load_seconds if check.name == "load" else 0.0)
+    return res
+
+
 def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> ValidationResult:
     """Run the selected checks of one model on ``renderer`` (in this process)."""
     model_json = Path(model_json)
@@ -49,6 +62,12 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
     renderer.ctx.take_messages()
     selected = _selected(options)
     t0 = time.perf_counter()
+    if selected & SOURCE_READERS:
+        # the source model is read on its own thread from here, while the build's files are
+        # read, uploaded and drawn (its sidecar names the source)
+        side = read_sidecar(model_json)
+        if side is not None:  # else the load check reports what is wrong with it
+            start_source(ctx, side)
     try:
         parsed: dict[Path, Any] = {}
         with ctx.timer("load"):
@@ -61,8 +80,6 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
         ctx.load_error = str(exc)
     load_seconds = time.perf_counter() - t0
     drawable = ctx.model is not None and ctx.model.triangles(0) > 0
-    if ctx.model is not None and selected & SOURCE_READERS:
-        start_source(ctx)  # read on its own thread while the build is uploaded and drawn
     wants_render = any(c.needs_render and c.name in selected for c in REGISTRY)
     results: dict[str, CheckResult] = {}
     try:
@@ -81,20 +98,29 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
                         facing = renderer.render(ctx.gpu, cam, mode="facing")
                     ctx.coverage.append(compare.coverage(facing))
                     ctx.front.append(compare.front(facing))
-        # the checks that read the source model last: it is read on its own thread meanwhile
-        # (the report lists the checks in REGISTRY order whatever order they ran in)
+        # the checks that read the source model last: it is read on its own thread meanwhile;
+        # those that read files only (Check.beside) run on threads beside the others (the report
+        # lists the checks in REGISTRY order whatever order they ran in)
+        beside: dict[str, Any] = {}
+        pool = None
         for check in sorted(REGISTRY, key=lambda c: c.name in SOURCE_READERS):
             if check.name not in selected or check.name == "vulkan":
                 continue
-            c0 = time.perf_counter()
-            if check.name != "load" and check.name != "textures" and ctx.model is None:
-                res = CheckResult(check.name, "skip", messages=["the built files did not load"])
-            elif check.needs_render and not drawable:
-                res = CheckResult(check.name, "skip", messages=["the model has no triangles to draw"])
+            if check.beside and ctx.model is not None:
+                if pool is None:
+                    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+                    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="assetpipe-check")
+                beside[check.name] = pool.submit(_run_one, check, ctx, drawable, load_seconds)
             else:
-                res = check.run(ctx)
-            res.seconds = time.perf_counter() - c0 + (load_seconds if check.name == "load" else 0.0)
-            results[check.name] = res
+                results[check.name] = _run_one(check, ctx, drawable, load_seconds)
+        try:
+            with ctx.timer("compare"):
+                for name, fut in beside.items():
+                    results[name] = fut.result()
+        finally:
+            if pool is not None:
+                pool.shutdown(wait=True)
     finally:
         if ctx.gpu is not None:
             renderer.release(ctx.gpu)

@@ -53,6 +53,33 @@ def test_round_trip_identical(w, h, vk):
     assert write_ktx2(img.levels, vk) == data  # deterministic
 
 
+def test_mapped_levels_are_views_of_the_file(tmp_path):
+    """``map_file`` + ``copy=False`` (the validator's loader): the same levels as a copying read,
+    as read-only views of the mapping (nothing of a level is read until it is used); small files
+    are read, not mapped."""
+    import mmap
+
+    from assetpipe.core import ktx2 as k
+
+    levels = chain_levels(1024, 512)  # 2.8 MB: over MAP_MIN_BYTES
+    data = write_ktx2(levels, VK_FORMAT_R8G8B8A8_SRGB)
+    assert len(data) >= k.MAP_MIN_BYTES
+    path = tmp_path / "big.ktx2"
+    path.write_bytes(data)
+    mapped = k.map_file(path)
+    assert isinstance(mapped, mmap.mmap)
+    img = read_ktx2(mapped, copy=False)
+    for a, b in zip(img.levels, read_ktx2(data).levels):
+        assert np.array_equal(a, b)
+    assert not img.levels[0].flags.writeable and not img.levels[0].flags.owndata
+    small = tmp_path / "small.ktx2"
+    small.write_bytes(write_ktx2(chain_levels(8, 8), VK_FORMAT_R8G8B8A8_UNORM))
+    assert isinstance(k.map_file(small), bytes)
+    empty = tmp_path / "empty.ktx2"
+    empty.write_bytes(b"")
+    assert k.map_file(empty) == b""
+
+
 def test_header_and_layout_follow_the_spec():
     levels = chain_levels(300, 17)
     data = write_ktx2(levels, VK_FORMAT_R8G8B8A8_SRGB)

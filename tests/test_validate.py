@@ -54,6 +54,28 @@ def test_fixture_passes_every_check() -> None:
     assert src is not None and all(v["xor"] < 0.01 for v in src.figures["views"])
 
 
+def test_checks_beside_give_the_same_results_and_phases_add_up(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The checks that read files only (Check.beside: textures, roles) run on threads beside the
+    others: every result equals the one of running them in turn, the report keeps the registry
+    order, and the phases (load, upload, render, compare) still add up to at most the model's
+    wall time (a check beside is not split into phases; the runner's wait for it is compare)."""
+    import time
+
+    from assetpipe.renderer.checks import REGISTRY
+
+    assert {c.name for c in REGISTRY if c.beside} == {"textures", "roles"}
+    t0 = time.perf_counter()
+    side = validate_model(CUBE, OPTS, isolate=False)
+    wall = time.perf_counter() - t0
+    assert sum(side.timings.values()) <= wall
+    for c in REGISTRY:
+        monkeypatch.setattr(type(c), "beside", False)
+    inline = validate_model(CUBE, OPTS, isolate=False)
+    assert [c.name for c in side.checks] == [c.name for c in inline.checks]
+    for a, b in zip(side.checks, inline.checks):
+        assert (a.status, a.messages, a.figures) == (b.status, b.messages, b.figures), a.name
+
+
 def test_index_out_of_range_fails(cube: Path) -> None:
     idx = cube.with_name("cube.idx")
     a = np.fromfile(idx, "<u4")

@@ -123,6 +123,7 @@ def _reduce(rgba: np.ndarray, size: tuple[int, int], role: str, fmt: int) -> np.
 
 class RolesCheck(Check):
     name = "roles"
+    beside = True
     measures = ("for each material texture role (baseColor, metallicRoughness, normal, occlusion, emissive): "
                 "mean absolute difference (0..1 of the stored codes, RGB) between the KTX2 mip level nearest "
                 f"{ROLE_PX} px and the source glTF's image for that material and role, area-reduced the same "

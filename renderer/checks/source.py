@@ -45,15 +45,21 @@ def find_source(model_json: Path, side: dict[str, Any], options: ValidateOptions
     return found[0].resolve() if found else None
 
 
-def start_source(ctx: Context) -> None:
+def start_source(ctx: Context, sidecar: dict[str, Any] | None = None) -> None:
     """Start reading the context's source model on a thread of its own, so that its parsing,
     image decoding and mip chains (OpenCV releases the GIL) overlap the build's upload and
     renders (AlphaBlendModeTest, four 2048^2 images, in-process, alternating: 1.64, 1.72, 1.52 s
     -> 1.48, 1.33, 1.58 s). :func:`load_source` waits for it; what it returns or raises is the
-    same as reading it there."""
-    if "source" in ctx.cache or "source_future" in ctx.cache or ctx.model is None:
+    same as reading it there. ``sidecar``: the built model's sidecar, read before the model
+    (whose KTX2 files take a while at 4096^2) so that the thread starts first; default: the
+    loaded model's."""
+    if "source" in ctx.cache or "source_future" in ctx.cache:
         return
-    src = find_source(ctx.model_json, ctx.model.sidecar, ctx.options)
+    if sidecar is None:
+        if ctx.model is None:
+            return
+        sidecar = ctx.model.sidecar
+    src = find_source(ctx.model_json, sidecar, ctx.options)
     if src is None:
         return  # load_source says why
     from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415

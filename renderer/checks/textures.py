@@ -219,6 +219,7 @@ def _normal_checks(key: str, samples: dict[int, np.ndarray], r: CheckResult, msg
 
 class TexturesCheck(Check):
     name = "textures"
+    beside = True
     measures = ("every material texture: the KTX2 reads; vkFormat, size and level count match the sidecar and "
                 "the role (sRGB for baseColor/emissive, linear otherwise); the full mip chain with the expected "
                 "sizes; no level all black unless level 0's mean rounds to black; each level's linear "
