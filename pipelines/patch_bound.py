@@ -60,6 +60,8 @@ from numba import njit
 
 #: triangles of a patch at most (more: the cell is left to subdivision)
 PATCH_MAX = 192
+# slots of the per-cell edge table (open addressing, at most 3 * PATCH_MAX = 576 edges: load <= 0.56)
+_HASH = 1024
 _STACK = 128
 _ORIENT_MARGIN = 1e-12   # side tests: margin, times the cell's size squared
 _WELL_SHAPED = 1e-3      # projected area >= this x longest projected edge^2: interpolate
@@ -224,8 +226,6 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
     far_ = np.empty(PATCH_MAX)          # twice the signed projected area
     side = np.zeros(PATCH_MAX, dtype=np.int8)   # +1 / -1: reaches into T, facing so; 0: not
     zmax = np.empty(PATCH_MAX)
-    ekey = np.empty(3 * PATCH_MAX, dtype=np.int64)
-    eref = np.empty(3 * PATCH_MAX, dtype=np.int64)   # 3 * slot + edge
     lo = np.empty(3)
     hi = np.empty(3)
     tx = np.empty(3)
@@ -236,6 +236,14 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
     by = np.empty(12)
     sx = np.empty(2)
     sy = np.empty(2)
+    hstamp = np.zeros(_HASH, dtype=np.int64)
+    hkey = np.empty(_HASH, dtype=np.int64)
+    hidx = np.empty(_HASH, dtype=np.int64)
+    uslot = np.empty(3 * PATCH_MAX, dtype=np.int64)
+    ucount = np.empty(3 * PATCH_MAX, dtype=np.int64)
+    uref0 = np.empty(3 * PATCH_MAX, dtype=np.int64)
+    uref1 = np.empty(3 * PATCH_MAX, dtype=np.int64)
+    stamp = 0
     for i in range(k):
         r = rho[i]
         if not (r >= 0.0 and r < np.inf):
@@ -314,7 +322,8 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
             why[i] = WHY_UNCOVERED
             continue
         best = 0.0
-        ne = 0
+        nu = 0   # unique edges, in first-seen order
+        stamp += 1
         for j in range(m):
             if side[j] != sg:
                 continue
@@ -322,38 +331,72 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
             f = sel[j]
             for e in range(3):
                 u, w = wtri[f, e], wtri[f, (e + 1) % 3]
-                ekey[ne] = (min(u, w) << 32) | max(u, w)
-                eref[ne] = 3 * j + e
-                ne += 1
+                key = (min(u, w) << 32) | max(u, w)
+                hs = ((key * 0x5851F42D4C957F2D) >> 54) & (_HASH - 1)  # multiplicative hash (odd constant < 2^63; int64 wraps)
+                while True:
+                    if hstamp[hs] != stamp:
+                        hstamp[hs] = stamp
+                        hkey[hs] = key
+                        uslot[nu] = hs
+                        ucount[nu] = 1
+                        uref0[nu] = 3 * j + e
+                        hidx[hs] = nu
+                        nu += 1
+                        break
+                    if hkey[hs] == key:
+                        q = hidx[hs]
+                        if ucount[q] == 1:
+                            uref1[q] = 3 * j + e
+                        ucount[q] += 1
+                        break
+                    hs = (hs + 1) & (_HASH - 1)
         # every edge of S reaching into T: interior to S (exactly two triangles of S) and
         # unfolded (their third corners strictly on opposite sides of its line)
-        perm = np.argsort(ekey[:ne])
         ok = True
-        q0 = 0
-        while q0 < ne and ok:
-            q1 = q0 + 1
-            while q1 < ne and ekey[perm[q1]] == ekey[perm[q0]]:
-                q1 += 1
+        for q in range(nu):
+            cnt = ucount[q]
+            # reaching: any copy's segment not separated from T (the copies join the same two
+            # welded positions, maybe in the other direction, which rounds the side tests
+            # differently: each is tried until one reaches, as when the edges were sorted)
             reaching = False
-            for q in range(q0, q1):
-                j, e = eref[perm[q]] // 3, eref[perm[q]] % 3
+            j, e = uref0[q] // 3, uref0[q] % 3
+            sx[0], sy[0] = fx[j, e], fy[j, e]
+            sx[1], sy[1] = fx[j, (e + 1) % 3], fy[j, (e + 1) % 3]
+            if not _separated(sx, sy, 2, tx, ty, -margin):
+                reaching = True
+            elif cnt >= 2:
+                j, e = uref1[q] // 3, uref1[q] % 3
                 sx[0], sy[0] = fx[j, e], fy[j, e]
                 sx[1], sy[1] = fx[j, (e + 1) % 3], fy[j, (e + 1) % 3]
                 if not _separated(sx, sy, 2, tx, ty, -margin):
                     reaching = True
-                    break
+            if not reaching and cnt > 2:  # a non-manifold edge (rare): its other copies
+                key = hkey[uslot[q]]
+                for j in range(m):
+                    if side[j] != sg or reaching:
+                        continue
+                    f = sel[j]
+                    for e in range(3):
+                        u, w = wtri[f, e], wtri[f, (e + 1) % 3]
+                        if ((min(u, w) << 32) | max(u, w)) != key or 3 * j + e == uref0[q] \
+                                or 3 * j + e == uref1[q]:
+                            continue
+                        sx[0], sy[0] = fx[j, e], fy[j, e]
+                        sx[1], sy[1] = fx[j, (e + 1) % 3], fy[j, (e + 1) % 3]
+                        if not _separated(sx, sy, 2, tx, ty, -margin):
+                            reaching = True
+                            break
             if reaching:
-                if q1 - q0 != 2:
+                if cnt != 2:
                     ok = False
-                    why[i] = WHY_BORDER if q1 - q0 == 1 else WHY_NON_MANIFOLD
+                    why[i] = WHY_BORDER if cnt == 1 else WHY_NON_MANIFOLD
                     break
-                ja, ea = eref[perm[q0]] // 3, eref[perm[q0]] % 3
-                jb, eb = eref[perm[q0 + 1]] // 3, eref[perm[q0 + 1]] % 3
+                ja, ea = uref0[q] // 3, uref0[q] % 3
+                jb, eb = uref1[q] // 3, uref1[q] % 3
                 if wtri[sel[ja], ea] == wtri[sel[ja], (ea + 1) % 3]:
                     ok = False  # a degenerate edge (one welded vertex)
                     why[i] = WHY_FOLDED
                     break
-                # the edge's line (from triangle ja), each triangle's third corner
                 s1 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
                              fx[ja, (ea + 2) % 3], fy[ja, (ea + 2) % 3])
                 s2 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
@@ -362,7 +405,6 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
                     ok = False
                     why[i] = WHY_FOLDED
                     break
-            q0 = q1
         if ok:
             # points within ``margin`` of T's border may be uncovered (edges reaching less
             # than that into T are not checked): each is within margin * size / inradius of
