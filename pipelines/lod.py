@@ -306,6 +306,19 @@ class _Estimator:
         self.samples = sample_surface(local, idx, n, seed)
         self.rng_seed = seed + 7
         self._engine = engine
+        # the BVH each candidate's forward half built, by the candidate's index array (kept
+        # alive here): the recorded bound of the chosen level reuses it (keep() drops the rest)
+        self._built: dict[int, tuple[np.ndarray, object]] = {}
+
+    def engine_for(self, tri: np.ndarray):
+        """The BVH the forward half built over ``tri`` (this very array), or None."""
+        got = self._built.get(id(tri))
+        return got[1] if got is not None and got[0] is tri else None
+
+    def keep(self, tris: Sequence[np.ndarray]) -> None:
+        """Forget the BVHs of every candidate but ``tris`` (the chosen levels)."""
+        ids = {id(t) for t in tris}
+        self._built = {k: v for k, v in self._built.items() if k in ids}
 
     def _subset(self, ids: np.ndarray) -> np.ndarray:
         if ids.shape[0] <= self.n:
@@ -343,7 +356,12 @@ class _Estimator:
         def forward(i: int) -> float:
             removed = self._subset(np.flatnonzero(self.used & ~used_of[i]))
             pts = np.concatenate([self.samples, self.local[removed]])
-            return float(_Engine(self.local, cands[i][0].astype(np.int64)).query(pts)[0].max())
+            tri = cands[i][0]
+            eng = self.engine_for(tri)
+            if eng is None:
+                eng = _Engine(self.local, tri.astype(np.int64))
+                self._built[id(tri)] = (tri, eng)
+            return float(eng.query(pts)[0].max())
 
         if lowest_of is None:
             return [max(forward(i), bwd[i]) for i in range(len(cands))]
@@ -487,12 +505,15 @@ def build_lod_chain(
         if e is not None and not math.isnan(e) and not e <= budget:
             break  # over the error budget even by the estimate (a lower value): not emitted
         chosen.append(best)
+        if est is not None:
+            est.keep([c[0][0] for c in chosen])
 
     # --- measure every chosen level against level 0 (one prepared reference, one batch)
     measured: list[SurfaceError | None] = [None] * len(chosen)
     if ref is not None and len(chosen) > 1:
         measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]],
-                                      lower=[c[1] for c in chosen[1:]])
+                                      lower=[c[1] for c in chosen[1:]],
+                                      engines=[est.engine_for(c[0][0]) for c in chosen[1:]])
         for k in range(1, len(chosen)):
             target = error_targets[k] if error_targets is not None else math.inf
             if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):

@@ -550,7 +550,8 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
 
 def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
              work_per_triangle: float | None = None,
-             lower: Sequence[float | None] | None = None) -> list[SurfaceError]:
+             lower: Sequence[float | None] | None = None,
+             engines: Sequence[_Engine | None] | None = None) -> list[SurfaceError]:
     if work_per_triangle is None:
         work_per_triangle = DEFAULT_WORK_PER_TRIANGLE
     """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices)."""
@@ -564,7 +565,8 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
             _check_finite(local, tri, "measured mesh")
         # a level over the reference's own vertices shares its welding (np.unique of the rows:
         # 40 ms for the bunny's 35k vertices, once per chain instead of once per level)
-        side = _Side(local, tri, _weld=ref.side.weld if shared else None)
+        side = _Side(local, tri, _engine=engines[i] if engines is not None else None,
+                     _weld=ref.side.weld if shared else None)
         used = _used_mask(tri, local.shape[0])
         # reference -> mesh: what the simplification lost
         work = int(min(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]),
@@ -607,17 +609,20 @@ def measure_against(
 
 
 def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
-                   lower: Sequence[float | None] | None = None) -> list[SurfaceError]:
+                   lower: Sequence[float | None] | None = None,
+                   engines: Sequence[_Engine | None] | None = None) -> list[SurfaceError]:
     """Measure index buffers over the reference's *own* vertex array (LOD levels).
 
     Args: ref from :func:`prepare_reference`; levels: (K, 3) int arrays indexing the
     reference's positions. Same bound as :func:`measure_against` with the reference's
     positions, faster: vertices and triangles shared by both meshes are exactly 0 apart and
-    not queried.
+    not queried. ``lower``: per level, a distance already evaluated between it and the
+    reference (or None), which starts its bound. ``engines``: per level, None or a BVH
+    already built over ``ref.positions`` and that level's triangles (``_Engine``), reused.
     """
     prepared = [(ref.positions, np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64), True)
                 for l in levels]
-    return _measure(ref, prepared, lower=lower)
+    return _measure(ref, prepared, lower=lower, engines=engines)
 
 
 def measure_error(

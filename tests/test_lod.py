@@ -391,6 +391,14 @@ def test_estimator_lowest_of_keeps_the_lowest_candidate_and_its_value():
     from assetpipe.pipelines.surface_error import _Engine
     shared = _Estimator(local, f.astype(np.int64), 2000, 11, engine=_Engine(local, f.astype(np.int64)))
     assert shared(cands) == full
+    # the forward halves' BVHs are kept by candidate array (for the recorded bound) until
+    # keep() names the chosen ones; asked again, a candidate reuses its BVH (same estimate)
+    assert all(shared.engine_for(c[0]) is not None for c in cands)
+    assert shared.engine_for(cands[0][0].copy()) is None  # by array, not by content
+    again = shared(cands)
+    assert again == full
+    shared.keep([cands[1][0]])
+    assert shared.engine_for(cands[1][0]) is not None and shared.engine_for(cands[0][0]) is None
     for lowest_of in ([0, 1, 2, 3], [1, 2, 3], [2, 3], [3, 0]):
         part = est(cands, lowest_of)
         i = min(lowest_of, key=lambda k: full[k])

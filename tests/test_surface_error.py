@@ -139,6 +139,11 @@ def test_known_lower_value_seeds_the_bound():
     # None and NaN (no estimate) are the plain measurement
     assert measure_levels(ref, [sub], lower=[None])[0] == plain
     assert measure_levels(ref, [sub], lower=[float("nan")])[0] == plain
+    # a BVH already built over the level (the estimator's) gives the same measurement
+    from assetpipe.pipelines.surface_error import _Engine
+    built = _Engine(ref.positions, sub.astype(np.int64))
+    assert measure_levels(ref, [sub], engines=[built])[0] == plain
+    assert measure_levels(ref, [sub], engines=[None])[0] == plain
 
 
 def test_empty_meshes():
