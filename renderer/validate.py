@@ -103,18 +103,18 @@ def run_checks(model_json: Path, options: ValidateOptions, renderer: Any) -> Val
         # lists the checks in REGISTRY order whatever order they ran in)
         beside: dict[str, Any] = {}
         pool = None
-        for check in sorted(REGISTRY, key=lambda c: c.name in SOURCE_READERS):
-            if check.name not in selected or check.name == "vulkan":
-                continue
-            if check.beside and ctx.model is not None:
-                if pool is None:
-                    from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
-
-                    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="assetpipe-check")
-                beside[check.name] = pool.submit(_run_one, check, ctx, drawable, load_seconds)
-            else:
-                results[check.name] = _run_one(check, ctx, drawable, load_seconds)
         try:
+            for check in sorted(REGISTRY, key=lambda c: c.name in SOURCE_READERS):
+                if check.name not in selected or check.name == "vulkan":
+                    continue
+                if check.beside and ctx.model is not None:
+                    if pool is None:
+                        from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
+
+                        pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="assetpipe-check")
+                    beside[check.name] = pool.submit(_run_one, check, ctx, drawable, load_seconds)
+                else:
+                    results[check.name] = _run_one(check, ctx, drawable, load_seconds)
             with ctx.timer("compare"):
                 for name, fut in beside.items():
                     results[name] = fut.result()
