@@ -509,7 +509,9 @@ def read_ktx2(data: bytes, name: str = "<ktx2>", copy: bool = True) -> Ktx2Image
 
 def map_file(path) -> bytes | mmap.mmap:
     """The bytes of a file, mapped read-only when it is large (pages are read when touched);
-    small and empty files are read."""
+    small and empty files are read. A mapped file truncated in place meanwhile would fault on
+    the pages past its new end; the build replaces files by rename, which leaves the mapped
+    one intact (the validator runs each model in a worker that reports a crash)."""
     with open(path, "rb") as f:
         size = os.fstat(f.fileno()).st_size
         if size < MAP_MIN_BYTES:
