@@ -293,19 +293,20 @@ class _Estimator:
     value of the true distance; the recorded error of the chosen level is the bound of
     :func:`measure_levels`, computed once per emitted level. Choosing by the bound instead
     doubled the measuring time of chain="best" (Duck, 5 levels: 12.4 s against 6.5 s
-    chained, under load). Level 0's BVH is built once and kept for every call; ``engine``
-    passes one already built over ``local`` and ``idx`` (the recorded bound's reference, whose
-    frame the estimator then shares)."""
+    chained, under load). Level 0's BVH is built on the first call and kept; ``side``: the
+    recorded bound's reference side over ``local`` and ``idx`` (its frame, which the estimator
+    then shares), whose BVH (built on first use by either) is used instead."""
 
     def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int,
-                 engine=None) -> None:
+                 side=None) -> None:
         self.local, self.idx, self.n, self.seed = local, idx, n, seed
         used = np.zeros(local.shape[0], bool)
         used[idx.reshape(-1)] = True
         self.used = used
         self.samples = sample_surface(local, idx, n, seed)
         self.rng_seed = seed + 7
-        self._engine = engine
+        self._side = side
+        self._engine = None
         # the BVH each candidate's forward half built, by the candidate's index array (kept
         # alive here): the recorded bound of the chosen level reuses it (keep() drops the rest)
         self._built: dict[int, tuple[np.ndarray, object]] = {}
@@ -335,7 +336,7 @@ class _Estimator:
         from assetpipe.pipelines.surface_error import _Engine
 
         if self._engine is None:
-            self._engine = _Engine(self.local, self.idx)
+            self._engine = self._side.engine if self._side is not None else _Engine(self.local, self.idx)
         back, sizes, used_of = [], [], []
         for c in cands:
             tri = c[0]
@@ -449,7 +450,7 @@ def build_lod_chain(
         ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0),
                                 seed=options.error_seed)
         est = _Estimator(ref.positions, ref.indices, min(options.samples_for(m0), ESTIMATE_SAMPLES),
-                         options.error_seed + 101, engine=ref.side.engine)
+                         options.error_seed + 101, side=ref.side)
     error_targets = options.error_targets()
     chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
     direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"

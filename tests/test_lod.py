@@ -387,10 +387,14 @@ def test_estimator_lowest_of_keeps_the_lowest_candidate_and_its_value():
     est = _Estimator(local, f.astype(np.int64), 2000, 11)
     full = est(cands)
     assert len(set(full)) == len(full)  # distinct: the test can tell them apart
-    # a level-0 BVH handed in (the recorded bound's reference's) gives the same estimates
-    from assetpipe.pipelines.surface_error import _Engine
-    shared = _Estimator(local, f.astype(np.int64), 2000, 11, engine=_Engine(local, f.astype(np.int64)))
+    # the level-0 BVH of a reference side handed in (the recorded bound's) gives the same
+    # estimates; it is built on the first call, not before
+    from assetpipe.pipelines.surface_error import _Side
+    side = _Side(local, f.astype(np.int64))
+    shared = _Estimator(local, f.astype(np.int64), 2000, 11, side=side)
+    assert side._engine is None
     assert shared(cands) == full
+    assert side._engine is not None
     # the forward halves' BVHs are kept by candidate array (for the recorded bound) until
     # keep() names the chosen ones; asked again, a candidate reuses its BVH (same estimate)
     assert all(shared.engine_for(c[0]) is not None for c in cands)
