@@ -11,7 +11,10 @@
    primitives: the importer flattens node transforms into the positions,
    :func:`find_affine_copies`): a copy reuses the chain of the first and its error bound,
    scaled by the map's largest singular value (plus the fit's residual, twice);
-4. builds one chain per distinct mesh (:func:`pipelines.lod.build_lod_chain`) and orders
+4. shares each level's triangle budget among the distinct meshes by error
+   (:func:`balanced_ratios`, ``LodOptions.balance_meshes``): one model-wide ratio, each mesh
+   at the count meshoptimizer reaches at a common model-unit error;
+5. builds one chain per distinct mesh (:func:`pipelines.lod.build_lod_chain`) and orders
    its vertices so every level uses a prefix (:func:`pipelines.lod.reorder_for_lod_prefix`).
 
 Pure: arrays in, arrays out.
@@ -197,6 +200,116 @@ def _scaled_levels(levels: Sequence[LodLevel], sigma: float, resid: float, diag:
 # ----------------------------------------------------------------------------- the model
 
 
+#: model-unit errors at which each mesh's count-against-error curve is sampled: log-spaced
+#: from this fraction of the largest mesh diagonal up to half of it. 10 points from 1e-4 cut
+#: 2CylinderEngine's curves from 0.71 to 0.47 s but took spider at 1/4 from 0.56x to 1.30x
+#: gltfpack's Hausdorff distance (benchmarks/lod.py TABLE 1: 41 -> 40 of 44 cells)
+CURVE_POINTS = 16
+CURVE_LOW = 1e-5
+#: the fewest triangles a mesh's share of a level is (at least ``min_triangles``): a closed
+#: surface needs 4, and smaller targets can simplify to nothing
+MIN_SHARE = 4
+
+
+def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: np.ndarray,
+                 options: LodOptions) -> np.ndarray:
+    """Triangles meshoptimizer keeps of one mesh at each model-unit error limit of ``errors``
+    (K,) float64, increasing: (K,) float64, non-increasing. The same welding and attributes as
+    its chain (:func:`pipelines.lod.build_lod_chain`), simplified from level 0 each time."""
+    from assetpipe.pipelines.lod import _attributes, _normalised, weld_for_simplification
+
+    local, _, diag = _normalised(pos, idx)
+    pos32 = np.ascontiguousarray(local, dtype=np.float32)
+    welded = weld_for_simplification(idx, pos, uv, normals, others, options.weld_normal_seams)
+    attrs = weights = None
+    if options.simplifier == "meshopt-attr":
+        attrs, weights = _attributes(uv, normals, options, pos.shape[0])
+    # meshoptimizer's limit is relative to the mesh's largest side; ours to its diagonal
+    scale = simp._scale_ratio(pos32, welded) if welded.size else 1.0
+    unit = diag if diag > 0 and math.isfinite(diag) else 1.0
+    counts = np.empty(errors.shape[0])
+    for k, e in enumerate(errors):
+        out, _ = simp.simplify(pos32, welded, options.min_triangles, attributes=attrs,
+                               attribute_weights=weights, lock_border=options.lock_border,
+                               target_error=float(e) / unit / scale)
+        counts[k] = out.shape[0]
+    return np.minimum.accumulate(np.minimum(counts, idx.shape[0]))
+
+
+def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
+                    options: LodOptions) -> list[tuple[float, ...]]:
+    """Per distinct mesh, the ratios of its own chain that share each level's model-wide budget
+    (``LodOptions.balance_meshes``).
+
+    ``meshes``: per distinct mesh ``(positions (N, 3) float64 model units, indices (M, 3), uv,
+    normals, others)``; ``weights``: how many times each is drawn (itself and its affine copies).
+    Level k's budget is ``ratios[k]`` x the weighted triangles; each mesh gets the triangles its
+    curve (:func:`_count_curve`) keeps at one common model-unit error ``e_k``, at most
+    ``(1 - min_saving)`` x its previous level's, and ``e_k`` is the smallest error whose
+    weighted total fits the budget (bisection on the curves, interpolated in log error).
+    Pure and deterministic."""
+    from assetpipe.pipelines.surface_error import local_frame
+
+    m = np.array([np.asarray(ix).reshape(-1, 3).shape[0] for _, ix, *_ in meshes], np.float64)
+    w = np.asarray(weights, np.float64)
+    diags = [local_frame(np.asarray(p, np.float64), np.asarray(ix).reshape(-1, 3))[1] for p, ix, *_ in meshes]
+    top = max([d for d in diags if d > 0 and math.isfinite(d)], default=1.0)
+    grid = np.geomspace(CURVE_LOW * top, 0.5 * top, CURVE_POINTS)
+    curves = np.stack([_count_curve(p, ix, uv, nm, ot, grid, options) for p, ix, uv, nm, ot in meshes])
+    # the fewest triangles each mesh can be given: MIN_SHARE (and min_triangles); for a mesh
+    # its curve shows collapsing to nothing (an open part can), the fewest it kept before that
+    # (a mesh that stalls above its share is taken further by its chain's pruning and sloppy
+    # candidates, as before)
+    least = float(max(options.min_triangles, MIN_SHARE))
+    reach = np.array([c[c > 0].min() if (c == 0).any() and (c > 0).any() else least
+                      for c in curves])
+    floor = np.minimum(np.maximum(reach, least), m)
+    curves = np.maximum(curves, floor[:, None])
+    log_grid = np.log(grid)
+
+    def counts_at(log_e: float) -> np.ndarray:
+        return np.array([np.interp(log_e, log_grid, c) for c in curves])
+
+    prev = m.copy()
+    out = [[1.0] for _ in meshes]
+    total = float((w * m).sum())
+    for r in options.ratios[1:]:
+        cap = np.floor((1.0 - options.min_saving) * prev)
+        budget = r * total
+        lo, hi = log_grid[0], log_grid[-1]
+        if (w * np.minimum(counts_at(lo), cap)).sum() > budget:
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if (w * np.minimum(counts_at(mid), cap)).sum() > budget:
+                    lo = mid
+                else:
+                    hi = mid
+            c = np.minimum(counts_at(hi), cap)
+        else:
+            c = np.minimum(counts_at(lo), cap)
+        # where the curves stop above the budget (meshoptimizer stalls: borders, seams), every
+        # mesh gives up the same share of what is left, below its curve: its chain then tries
+        # pruning and the sloppy simplifier there, as with one ratio for every mesh
+        if float((w * c).sum()) > budget:
+            # the same share s of every mesh above its floor: the largest s that fits
+            fl = np.minimum(floor, c)
+            s_lo, s_hi = 0.0, 1.0
+            for _ in range(60):
+                s_mid = 0.5 * (s_lo + s_hi)
+                if (w * np.maximum(fl, s_mid * c)).sum() > budget:
+                    s_hi = s_mid
+                else:
+                    s_lo = s_mid
+            c = np.maximum(fl, s_lo * c)
+        # never below what a chain can make (a mesh left without the level would keep all of
+        # its triangles there), never above the previous level (its chain then ends)
+        c = np.minimum(np.maximum(np.floor(c), floor), prev)
+        for i in range(len(meshes)):
+            out[i].append(float(min(1.0, c[i] / m[i])) if m[i] > 0 else r)
+        prev = c
+    return [tuple(o) for o in out]
+
+
 def merge_groups(keys: Sequence[Hashable], merge: bool) -> list[list[int]]:
     """Parts grouped by key, in order of first appearance (one group per part if not merge)."""
     if not merge:
@@ -240,11 +353,21 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
 
     copies = find_affine_copies([(m[2], m[3], m[8]) for m in merged])
     distinct = [i for i in range(len(merged)) if copies[i] is None]
+    weights = {i: 1 for i in distinct}
+    for c in copies:
+        if c is not None:
+            weights[c[0]] += 1
+    shares = None
+    if options.balance_meshes and options.error_targets() is None and len(distinct) > 1:
+        shares = balanced_ratios([merged[i][2:6] + (merged[i][6],) for i in distinct],
+                                 [weights[i] for i in distinct], options)
+        shares = dict(zip(distinct, shares))
 
     def chain_of(i: int) -> tuple[LodLevel, ...]:
         _, _, pos, idx, uv, normals, others, _, _ = merged[i]
+        opts = options if shares is None else dataclasses.replace(options, ratios=shares[i])
         return build_lod_chain(pos, idx, uv=uv, normals=normals, other_attributes=others,
-                               options=options).levels
+                               options=opts).levels
 
     # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
     # kernels release the GIL); each chain is a pure function of its mesh, so the result does
@@ -277,5 +400,5 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
     return out
 
 
-__all__ = ["LodPart", "LodMesh", "build_model_lods", "dedupe_triangles", "find_affine_copies",
-           "merge_groups", "LodChain"]
+__all__ = ["LodPart", "LodMesh", "balanced_ratios", "build_model_lods", "dedupe_triangles",
+           "find_affine_copies", "merge_groups", "LodChain"]

@@ -104,6 +104,14 @@ class LodOptions:
       distance is a maximum over a few places, which locks keep. Off by default: with 1M
       samples it moved no cell of benchmarks/lod.py across 1.1x gltfpack's (spider 1/2 1.94x ->
       1.26x, but beast 1/8 1.20x -> 1.37x) and costs 20-28% of the step (docs/BUILD.md).
+    balance_meshes: with ``ratios``, a ratio is of the *model's* triangles (its meshes after
+      merging, affine copies counted): each level's budget is shared among the model's
+      distinct meshes so that they reach about the same simplification error in model units
+      (meshoptimizer's own estimate, from each mesh's count-against-error curve), each mesh at
+      least ``min_saving`` fewer triangles than its previous level. A small detailed part is
+      then not halved like a large smooth one (spider at 1/2: 3.34% of the diagonal with one
+      ratio for every mesh, docs/BUILD.md). False: every mesh at every ratio. A model of one
+      distinct mesh, and chains asked for by errors or screen sizes, are not affected.
     dedupe_triangles: before simplifying, drop triangles whose three corners coincide with an
       earlier triangle's (same winding); where the material is double-sided also those with
       the reverse winding (the back face renders anyway). Level 0 is written without them.
@@ -136,6 +144,7 @@ class LodOptions:
     dedupe_triangles: bool = True
     geometry_candidate: bool = False
     lock_fraction: float = 0.0
+    balance_meshes: bool = True
 
     def __post_init__(self) -> None:
         from assetpipe.core.errors import ConfigError
