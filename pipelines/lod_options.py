@@ -108,7 +108,8 @@ class LodOptions:
       merging, affine copies counted): each level's budget is shared among the model's
       distinct meshes so that they reach about the same simplification error in model units
       (meshoptimizer's own estimate, from each mesh's count-against-error curve), each mesh at
-      least ``min_saving`` fewer triangles than its previous level. A small detailed part is
+      least ``min_saving`` fewer triangles than its previous level and at no less than 3/4 of
+      its even share (``lod_model.SHARE_KEEP``). A small detailed part is
       then not halved like a large smooth one (spider at 1/2: 3.34% of the diagonal with one
       ratio for every mesh, docs/BUILD.md). False: every mesh at every ratio. A model of one
       distinct mesh, and chains asked for by errors or screen sizes, are not affected.

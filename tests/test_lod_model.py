@@ -151,11 +151,12 @@ def test_merged_meshes_beat_per_mesh_at_equal_count():
     (n_m, e_m), (n_p, e_p), (n_b, e_b) = results[True, False], results[False, False], results[False, True]
     assert n_m <= 1.02 * n_p and n_b <= 1.02 * n_p  # equal counts (all aim at 1/8 of the whole)
     assert e_m < 0.8 * e_p, results
-    # one model-wide budget shared by error (balance_meshes) does for separate meshes nearly
-    # what merging does: the small spheres are not cut to 1/8 like the large one (measured
-    # 0.0054 -> 0.0023, merged 0.0020: the shares follow meshoptimizer's error estimate,
-    # sampled at 16 errors, where merging lets every collapse compete; 1.25x allows that)
-    assert e_b < 0.8 * e_p and e_b <= 1.25 * e_m, results
+    # one model-wide budget shared by error (balance_meshes) takes separate meshes most of the
+    # way to what merging does: the small spheres are not cut to 1/8 like the large one.
+    # Measured 0.0054 -> 0.0029, merged 0.0020: the shares follow meshoptimizer's error
+    # estimate and no mesh goes below 3/4 of its even share (SHARE_KEEP), where merging lets
+    # every collapse compete
+    assert e_b < 0.6 * e_p and e_b <= 1.6 * e_m, results
 
 
 def _flat_grid(n: int, size: float = 4.0):
@@ -187,8 +188,15 @@ def test_balanced_ratios_share_the_model_budget_by_error():
         prev = np.array([ratios[0][k - 1], ratios[1][k - 1]]) * m
         assert (c <= np.floor((1 - opts.min_saving) * prev) + 1e-9).all()
     assert ratios[1][1] > 0.5 and ratios[0][1] < 0.5  # the sphere keeps more than half
-    # the sphere drawn three times (two affine copies) weighs three times: it keeps more still
-    assert balanced_ratios(meshes, [1, 3], opts)[1][1] >= ratios[1][1]
+    # ... but the grid keeps at least SHARE_KEEP of its even share at every level
+    from assetpipe.pipelines.lod_model import SHARE_KEEP
+    for k, r in enumerate(opts.ratios[1:], start=1):
+        assert ratios[0][k] >= SHARE_KEEP * r - 1 / len(gt)
+    # the sphere drawn three times (two affine copies) counts three times in the budget
+    tripled = balanced_ratios(meshes, [1, 3], opts)
+    for k, r in enumerate(opts.ratios[1:], start=1):
+        c = np.array([tripled[0][k], tripled[1][k]]) * m
+        assert c[0] + 3 * c[1] <= r * (m[0] + 3 * m[1]) + 4
 
 
 def test_balancing_leaves_single_mesh_models_alone():
