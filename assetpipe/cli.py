@@ -110,7 +110,7 @@ def eval_ratio(text: str) -> float:
 @click.option("-q", "--quiet", is_flag=True, help="Print only failures and the summary line.")
 @click.option("--layout", default=",".join(_D.mesh.layout), show_default=True,
               help="Vertex attributes, comma-separated: position first, then any of uv0, normal, tangent, uv1, color.")
-@click.option("--lod-ratios", default=None, help=f"LOD triangle ratios of the model (its meshes share each level's budget by error), e.g. '1,1/2,1/4' [default: {','.join(f'{r:g}' for r in _D.lod.ratios)}].")
+@click.option("--lod-ratios", default=None, help=f"LOD triangle ratios, e.g. '1,1/2,1/4' [default: {','.join(f'{r:g}' for r in _D.lod.ratios)}].")
 @click.option("--no-lod", is_flag=True, help="Build LOD0 only.")
 @click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None,
               help=f"LOD simplifier [default: {_D.lod.simplifier}].")

@@ -20,7 +20,7 @@ LOD = 16  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         # 12: the recorded measurement seeds its bound with fewer samples (LodOptions.bound_samples_*): RMS estimate changes
         # 13: the pair bound is tried before the height field (recorded bounds within the tolerance, some differ)
         # 14: the estimator's value of a chosen level seeds its bound; the estimator works in the reference's frame
-        # 15: a model's distinct meshes share each level's triangle budget by error (LodOptions.balance_meshes)
+        # 15: a model's distinct meshes can share each level's triangle budget by error (LodOptions.balance_meshes, off by default)
         # 16: no mesh's share below 3/4 of its even share (lod_model.SHARE_KEEP)
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset

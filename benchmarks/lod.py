@@ -74,9 +74,11 @@ RESULTS = REPO / "benchmarks" / "results"
 RATIOS = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
 SIMPLIFIERS = ("meshopt", "meshopt-attr", "meshopt+lock_border", "sloppy", "fast-simplification")
 #: our variants in the comparison with gltfpack: the default; levels only from the level above;
-#: only from level 0; and the way the build made them before merging (one chain per mesh)
+#: only from level 0; the way the build made them before merging (one chain per mesh); and a
+#: model's meshes sharing each level's budget by error (LodOptions.balance_meshes, off by default)
 VARIANTS = {"ours": {}, "ours-chained": {"chain": "chained"}, "ours-direct": {"chain": "direct"},
-            "ours-per-mesh": {"merge_meshes": False, "chain": "chained", "dedupe_triangles": False}}
+            "ours-per-mesh": {"merge_meshes": False, "chain": "chained", "dedupe_triangles": False},
+            "ours-balanced": {"balance_meshes": True}}
 MIN_TRIANGLES = 300  # corpus files below this are too small to say anything
 
 
@@ -385,7 +387,7 @@ def main() -> int:
                     # the same levels without it, and are timed without it
                     opts = LodOptions(ratios=ratios, min_triangles=1, max_error=None,
                                       error_samples=min(args.samples, DEFAULT_LOD_OPTIONS.error_samples),
-                                      measure=variant == "ours" or args.measure_variants, **extra)
+                                      measure=variant in ("ours", "ours-balanced") or args.measure_variants, **extra)
                     t = time.perf_counter()
                     lm = build_model_lods(build, opts)
                     dt = time.perf_counter() - t
