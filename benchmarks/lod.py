@@ -382,9 +382,10 @@ def main() -> int:
                 # no error budget (a cell compares equal counts)
                 ratios = (1.0, *[max(g / m_build, 1e-9) for _, g, _ in gp])
                 for variant, extra in variants.items():
-                    # the build's measurement (a bound) only matters to "ours" (it picks among
-                    # chained and direct candidates by measurement); the other variants make
-                    # the same levels without it, and are timed without it
+                    # the build's measurement (a bound) only matters to "ours" and
+                    # "ours-balanced" (they pick among chained and direct candidates by
+                    # measurement); the other variants make the same levels without it, and
+                    # are timed without it
                     opts = LodOptions(ratios=ratios, min_triangles=1, max_error=None,
                                       error_samples=min(args.samples, DEFAULT_LOD_OPTIONS.error_samples),
                                       measure=variant in ("ours", "ours-balanced") or args.measure_variants, **extra)
