@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..loader import read_ktx2
+from ..loader import map_file, read_ktx2
 
 
 @dataclass(eq=False)
@@ -87,7 +87,9 @@ def open_ktx2(path: Path, cache: dict[str, Any] | None = None) -> Ktx2Levels:
     key = ktx2_cache_key(path)
     if cache is not None and key in cache:
         return cache[key]
-    out = Ktx2Levels(name=str(path), image=read_ktx2(Path(path).read_bytes()))
+    # read as the loader reads it: a large file mapped, its levels views (only what is sampled
+    # is read)
+    out = Ktx2Levels(name=str(path), image=read_ktx2(map_file(Path(path)), copy=False))
     if cache is not None:
         cache[key] = out
     return out
