@@ -27,7 +27,8 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                    lock_border: bool, max_texture_size: int | None, recenter: bool = False,
                    lod_max_error: float | None = None, lod_screen_sizes: str | None = None,
                    texture_compression: str | None = None, texture_zstd: bool = False,
-                   oversize_textures: str | None = None, budgets: dict | None = None):
+                   oversize_textures: str | None = None, budgets: dict | None = None,
+                   lod_balance: bool | None = None):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults.
     ``max_texture_size`` 0: no cap; ``budgets``: InputBudgets fields to change (None values kept)."""
     import dataclasses
@@ -50,6 +51,8 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                 changes["lock_border"] = True
             if lod_max_error is not None:
                 changes["max_error"] = lod_max_error if lod_max_error > 0 else None
+            if lod_balance is not None:
+                changes["balance_meshes"] = bool(lod_balance)
             if lod_screen_sizes:
                 changes["target_screen_sizes"] = (0.0, *(float(x) for x in lod_screen_sizes.split(",")))
             lod = dataclasses.replace(d.lod, **changes)
@@ -115,6 +118,10 @@ def eval_ratio(text: str) -> float:
 @click.option("--simplifier", type=click.Choice(SIMPLIFIERS), default=None,
               help=f"LOD simplifier [default: {_D.lod.simplifier}].")
 @click.option("--lock-border", is_flag=True, help="Keep open mesh borders in place in every LOD.")
+@click.option("--lod-balance/--no-lod-balance", default=None,
+              help="Share each LOD level's triangle budget among a model's meshes by error, so a small "
+                   "detailed part is not halved like a large smooth one (--no-lod-balance: every mesh at "
+                   f"every ratio; docs/BUILD.md) [default: {'on' if _D.lod.balance_meshes else 'off'}].")
 @click.option("--lod-max-error", type=float, default=None,
               help=f"LOD error budget, a fraction of the mesh's diagonal: a level whose measured error exceeds it is "
                    f"not written; 0 for no budget [default: {_D.lod.max_error:g}].")
@@ -158,7 +165,7 @@ def eval_ratio(text: str) -> float:
 def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
           max_image_pixels, texture_compression, texture_zstd, oversize_textures, max_model_mb, max_placements,
-          max_triangles, max_coordinate) -> None:
+          max_triangles, max_coordinate, lod_balance) -> None:
     """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
     files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
     what its objects can use, and OUT/<scene>.scene.json lists the instances."""
@@ -176,11 +183,11 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  max_output_mb=max_output_mb, max_image_pixels=max_image_pixels,
                  texture_compression=texture_compression, texture_zstd=texture_zstd,
                  oversize_textures=oversize_textures, max_model_mb=max_model_mb, max_placements=max_placements,
-                 max_triangles=max_triangles, max_coordinate=max_coordinate)
+                 max_triangles=max_triangles, max_coordinate=max_coordinate, lod_balance=lod_balance)
     values, origin = _project_defaults(inputs, **given)
     (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, lod_max_error, lod_screen_sizes,
      max_texture_size, recenter, max_output_mb, max_image_pixels, texture_compression, texture_zstd,
-     oversize_textures, max_model_mb, max_placements, max_triangles, max_coordinate) = values
+     oversize_textures, max_model_mb, max_placements, max_triangles, max_coordinate, lod_balance) = values
     if jobs is None:
         jobs = usable_cpus()  # as ninja: the CPUs this process may run on
     if explain:
@@ -198,7 +205,8 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  "max_triangles": max_triangles or _D.budgets.max_triangles,
                  "max_coordinate": max_coordinate or _D.budgets.max_coordinate,
                  "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels,
-                 "texture_compression": texture_compression or _D.texture.compression, "texture_zstd": texture_zstd}
+                 "texture_compression": texture_compression or _D.texture.compression, "texture_zstd": texture_zstd,
+                 "lod_balance": _D.lod.balance_meshes if lod_balance is None else lod_balance}
         for name, where in origin.items():
             click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
@@ -206,7 +214,7 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                    max_placements=max_placements, max_triangles=max_triangles, max_coordinate=max_coordinate)
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
                              lod_max_error, lod_screen_sizes, texture_compression, texture_zstd,
-                             oversize_textures, budgets)
+                             oversize_textures, budgets, lod_balance)
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))

@@ -217,11 +217,55 @@ MIN_SHARE = 4
 SHARE_KEEP = 0.75
 
 
+#: triangles of a simplified mesh whose facing is checked (:func:`_flipped_fraction`): an
+#: area-weighted draw with a fixed seed when it has more
+FLIP_SAMPLES = 4096
+
+
+def _face_normals(pos: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unit normals (M, 3) float64, zero for degenerate triangles; areas x 2 (M,) float64)."""
+    n = np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]])
+    a = np.linalg.norm(n, axis=1)
+    return n / np.where(a > 0, a, 1.0)[:, None], a
+
+
+def _flipped_fraction(local: np.ndarray, tri: np.ndarray, ref_normals: np.ndarray, engine) -> tuple[float, int]:
+    """(part of the area of the simplified mesh ``tri`` (K, 3) over ``local`` (N, 3) float64
+    whose nearest level-0 triangle faces the other way, number of triangles it was judged on).
+
+    A triangle counts as flipped when the level-0 triangle nearest its centroid has a normal at
+    more than 90 degrees to its own: where the simplifier folded a thin part flat (a leg
+    collapsed to a ribbon), back-face culling leaves holes a Hausdorff distance does not see.
+    At most :data:`FLIP_SAMPLES` triangles, drawn by area with a fixed seed."""
+    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    n, area = _face_normals(local, tri)
+    ok = np.flatnonzero(area > 0)
+    if ok.size == 0:
+        return 0.0, 0
+    if ok.size > FLIP_SAMPLES:
+        rng = np.random.default_rng(0)
+        pick = rng.choice(ok, FLIP_SAMPLES, p=area[ok] / area[ok].sum())
+        weight = np.ones(pick.size)
+    else:
+        pick, weight = ok, area[ok]
+    cen = local[tri[pick]].mean(axis=1)
+    _, near = engine.query(cen)
+    flipped = (n[pick] * ref_normals[near]).sum(axis=1) < 0
+    return float(weight[flipped].sum() / weight.sum()), int(pick.size)
+
+
 def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: np.ndarray,
-                 options: LodOptions) -> np.ndarray:
+                 options: LodOptions, facing_from: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Triangles meshoptimizer keeps of one mesh at each model-unit error limit of ``errors``
-    (K,) float64, increasing: (K,) float64, non-increasing. The same welding and attributes as
-    its chain (:func:`pipelines.lod.build_lod_chain`), simplified from level 0 each time."""
+    (K,) float64, increasing, with the same welding and attributes as its chain
+    (:func:`pipelines.lod.build_lod_chain`), simplified from level 0 each time.
+
+    Returns ``(counts, flipped, judged)``, each (K,): counts float64 (as simplified, not made
+    monotone), the part of each result's area that faces away from level 0
+    (:func:`_flipped_fraction`) float64, and the number of triangles that was judged on (0
+    and 0 where not judged: at points with ``facing_from`` triangles or more, except the last
+    of them; by default every point is judged)."""
+    from assetpipe.pipelines.closest_point import ClosestTriangles
     from assetpipe.pipelines.lod import _attributes, _normalised, weld_for_simplification
 
     local, _, diag = _normalised(pos, idx)
@@ -233,17 +277,58 @@ def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: 
     # meshoptimizer's limit is relative to the mesh's largest side; ours to its diagonal
     scale = simp._scale_ratio(pos32, welded) if welded.size else 1.0
     unit = diag if diag > 0 and math.isfinite(diag) else 1.0
-    counts = np.empty(errors.shape[0])
+    local64 = np.asarray(local, np.float64)
+    tri0 = np.asarray(idx, np.int64).reshape(-1, 3)
+    engine = ClosestTriangles.build(local64, tri0) if tri0.size else None
+    ref_normals = _face_normals(local64, tri0)[0]
+    counts, flipped, judged = (np.zeros(errors.shape[0]) for _ in range(3))
+    outs = []
     for k, e in enumerate(errors):
         out, _ = simp.simplify(pos32, welded, options.min_triangles, attributes=attrs,
                                attribute_weights=weights, lock_border=options.lock_border,
                                target_error=float(e) / unit / scale)
-        counts[k] = out.shape[0]
-    return np.minimum.accumulate(np.minimum(counts, idx.shape[0]))
+        counts[k] = min(out.shape[0], idx.shape[0])
+        outs.append(out)
+    # the facing is judged only where a share can fall (:func:`_facing_floor`): below
+    # ``facing_from`` triangles and at the point nearest above it
+    above = np.flatnonzero(counts >= facing_from)
+    first = int(above.max()) if above.size else 0
+    for k in range(first, errors.shape[0]):
+        if engine is not None and outs[k].size:
+            flipped[k], judged[k] = _flipped_fraction(local64, outs[k], ref_normals, engine)
+    return counts, flipped, judged
+
+
+def _facing_floor(counts: np.ndarray, flipped: np.ndarray, judged: np.ndarray, even: float) -> float:
+    """The fewest triangles below ``even`` (a mesh's even share of a level) it may be given
+    without more of its area facing away from level 0 than at the even share (0: no limit).
+
+    ``counts``/``flipped``/``judged``: a mesh's curve (:func:`_count_curve`). The part at the
+    even share is taken, conservatively, from the curve's point nearest above it (its fewest
+    triangles at or above ``even``); a count is allowed while the curve stays within that part
+    plus twice its standard error (the difference a draw of that many triangles shows by
+    chance), with the crossing interpolated in log count: a part is given fewer triangles than
+    one ratio would give it only where its facing is not measurably worse."""
+    order = np.argsort(-counts, kind="stable")  # most triangles first
+    c, f, n = counts[order], flipped[order], np.maximum(judged[order], 1.0)
+    live = c > 0
+    c, f, n = c[live], f[live], n[live]
+    above = np.flatnonzero(c >= even)
+    if c.size == 0 or even <= 0 or above.size == 0:
+        return 0.0
+    j0 = int(above[-1])
+    p = min(max(float(f[j0]), 1.0 / n[j0]), 1.0)
+    allowed = float(f[j0]) + 2.0 * math.sqrt(p * (1.0 - p) / n[j0])
+    for j in range(j0 + 1, c.size):
+        if f[j] > allowed:
+            # the crossing between the last allowed point and this one
+            t = (allowed - f[j - 1]) / (f[j] - f[j - 1]) if f[j] > f[j - 1] else 1.0
+            return float(math.exp(math.log(c[j - 1]) + t * (math.log(c[j]) - math.log(c[j - 1]))))
+    return 0.0
 
 
 def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
-                    options: LodOptions) -> list[tuple[float, ...]]:
+                    options: LodOptions, threads: int = 1) -> list[tuple[float, ...]]:
     """Per distinct mesh, the ratios of its own chain that share each level's model-wide budget
     (``LodOptions.balance_meshes``).
 
@@ -262,7 +347,21 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
     diags = [local_frame(np.asarray(p, np.float64), np.asarray(ix).reshape(-1, 3))[1] for p, ix, *_ in meshes]
     top = max([d for d in diags if d > 0 and math.isfinite(d)], default=1.0)
     grid = np.geomspace(CURVE_LOW * top, 0.5 * top, CURVE_POINTS)
-    curves = np.stack([_count_curve(p, ix, uv, nm, ot, grid, options) for p, ix, uv, nm, ot in meshes])
+    first = options.ratios[1] if len(options.ratios) > 1 else 0.0
+    def curve(i: int):
+        p, ix, uv, nm, ot = meshes[i]
+        return _count_curve(p, ix, uv, nm, ot, grid, options, facing_from=first * m[i])
+
+    # each curve is a pure function of its mesh: on ``threads`` threads, largest first
+    # (meshoptimizer and the BVH query release the GIL); the result does not depend on them
+    if threads > 1 and len(meshes) > 1:
+        order = sorted(range(len(meshes)), key=lambda i: -m[i])
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            got = dict(zip(order, pool.map(curve, order)))
+        raw = [got[i] for i in range(len(meshes))]
+    else:
+        raw = [curve(i) for i in range(len(meshes))]
+    curves = np.stack([np.minimum.accumulate(c) for c, _, _ in raw])
     # the fewest triangles each mesh can be given: MIN_SHARE (and min_triangles); for a mesh
     # its curve shows collapsing to nothing (an open part can), the fewest it kept before that
     # (a mesh that stalls above its share is taken further by its chain's pruning and sloppy
@@ -284,7 +383,9 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
         cap = np.floor((1.0 - options.min_saving) * prev)
         budget = r * total
         lo, hi = log_grid[0], log_grid[-1]
-        keep = np.minimum(SHARE_KEEP * r * m, cap)  # no mesh below SHARE_KEEP of its even share
+        # no mesh below SHARE_KEEP of its even share, nor where its facing gets worse than there
+        facing = np.array([_facing_floor(*raw[i], r * m[i]) for i in range(len(meshes))])
+        keep = np.minimum(np.maximum(SHARE_KEEP * r * m, facing), cap)
 
         def share(log_e: float) -> np.ndarray:
             return np.maximum(np.minimum(counts_at(log_e), cap), keep)
@@ -304,7 +405,7 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
         # pruning and the sloppy simplifier there, as with one ratio for every mesh
         if float((w * c).sum()) > budget:
             # the same share s of every mesh above its floor: the largest s that fits
-            fl = np.minimum(floor, c)
+            fl = np.minimum(np.maximum(floor, np.minimum(facing, r * m)), c)
             s_lo, s_hi = 0.0, 1.0
             for _ in range(60):
                 s_mid = 0.5 * (s_lo + s_hi)
@@ -369,10 +470,12 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
     for c in copies:
         if c is not None:
             weights[c[0]] += 1
+    # never more than LOD_THREADS (the cores, at most 4): -j 8 on 2 cores is 8 processes already
+    threads = min(LOD_THREADS, max(1, int(threads)) if threads is not None else LOD_THREADS, len(distinct))
     shares = None
     if options.balance_meshes and options.error_targets() is None and len(distinct) > 1:
         shares = balanced_ratios([merged[i][2:6] + (merged[i][6],) for i in distinct],
-                                 [weights[i] for i in distinct], options)
+                                 [weights[i] for i in distinct], options, threads=threads)
         shares = dict(zip(distinct, shares))
 
     def chain_of(i: int) -> tuple[LodLevel, ...]:
@@ -384,8 +487,6 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
     # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
     # kernels release the GIL); each chain is a pure function of its mesh, so the result does
     # not depend on the thread count or order
-    # never more than LOD_THREADS (the cores, at most 4): -j 8 on 2 cores is 8 processes already
-    threads = min(LOD_THREADS, max(1, int(threads)) if threads is not None else LOD_THREADS, len(distinct))
     if threads > 1:
         distinct.sort(key=lambda i: -merged[i][3].shape[0])
         with ThreadPoolExecutor(max_workers=threads) as pool:

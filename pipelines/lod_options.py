@@ -108,15 +108,15 @@ class LodOptions:
       merging, affine copies counted): each level's budget is shared among the model's
       distinct meshes so that they reach about the same simplification error in model units
       (meshoptimizer's own estimate, from each mesh's count-against-error curve), each mesh at
-      least ``min_saving`` fewer triangles than its previous level and at no less than 3/4 of
-      its even share (``lod_model.SHARE_KEEP``). A small detailed part is
-      then not halved like a large smooth one (spider at 1/2: 3.34% -> 1.02% of the diagonal;
-      benchmarks/lod.py TABLE 1 39 -> 40 of 44 cells within 1.1x gltfpack's). **Off by
-      default**: the budget it moves comes from the parts meshoptimizer's error rates cheap,
-      and thin ones are not: spider's legs, cut further, show holes in culled renders, and
-      `assetpipe validate`'s lods check fails its LOD2 (14 pixels off by more than 1 px at the
-      switch distance, budget 4; docs/BUILD.md). False: every mesh at every ratio. A model of
-      one distinct mesh, and chains asked for by errors or screen sizes, are not affected.
+      least ``min_saving`` fewer triangles than its previous level, at no less than 3/4 of
+      its even share (``lod_model.SHARE_KEEP``), and not below its even share where fewer
+      triangles turn measurably more of its surface away from level 0
+      (``lod_model._facing_floor``: meshoptimizer's error hardly sees a thin part folded flat,
+      which leaves holes once back faces are culled). A small detailed part is then not
+      halved like a large smooth one (spider at 1/2: 3.34% -> 1.02% of the diagonal;
+      benchmarks/lod.py TABLE 1 39 -> 40 of 44 cells within 1.1x gltfpack's). On by default
+      (LOD step 17); False: every mesh at every ratio. A model of one distinct mesh, and
+      chains asked for by errors or screen sizes, are not affected.
     dedupe_triangles: before simplifying, drop triangles whose three corners coincide with an
       earlier triangle's (same winding); where the material is double-sided also those with
       the reverse winding (the back face renders anyway). Level 0 is written without them.
@@ -149,7 +149,7 @@ class LodOptions:
     dedupe_triangles: bool = True
     geometry_candidate: bool = False
     lock_fraction: float = 0.0
-    balance_meshes: bool = False
+    balance_meshes: bool = True
 
     def __post_init__(self) -> None:
         from assetpipe.core.errors import ConfigError

@@ -84,3 +84,23 @@ def test_inputs_under_different_project_files_are_refused(tmp_path):
         (tmp_path / name / "assetpipe.toml").write_text("jobs = 1\n")
     with pytest.raises(ProjectConfigError, match="the inputs lie under different project files"):
         project_config_for([tmp_path / "a", tmp_path / "b"])
+
+
+def test_lod_balance_from_the_project_file_and_the_flag(proj):
+    """lod_balance (--lod-balance/--no-lod-balance) reaches LodOptions.balance_meshes; the
+    default is LodOptions' own."""
+    from assetpipe.cli import _build_options
+    from assetpipe.options import DEFAULT_BUILD_OPTIONS
+
+    assert _build_options("position,uv0", None, False, None, False, None).lod.balance_meshes \
+        is DEFAULT_BUILD_OPTIONS.lod.balance_meshes
+    assert _build_options("position,uv0", None, False, None, False, None, lod_balance=False).lod.balance_meshes is False
+    (proj / "proj" / "assetpipe.toml").write_text("lod_balance = false\njobs = 1\n")
+    r = build(proj, "--explain")
+    assert r.exit_code == 0, r.output
+    assert f"option lod-balance: False ({proj / 'proj' / 'assetpipe.toml'})" in r.output
+    r = build(proj, "--lod-balance", "--explain")
+    assert r.exit_code == 0 and "option lod-balance: True (command line)" in r.output
+    (proj / "proj" / "assetpipe.toml").write_text('lod_balance = "no"\n')
+    r = build(proj)
+    assert r.exit_code != 0 and "lod_balance" in r.output
