@@ -255,7 +255,8 @@ def _flipped_fraction(local: np.ndarray, tri: np.ndarray, ref_normals: np.ndarra
 
 
 def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: np.ndarray,
-                 options: LodOptions, facing_from: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 options: LodOptions, facing_from: float = math.inf,
+                 enough: float = math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Triangles meshoptimizer keeps of one mesh at each model-unit error limit of ``errors``
     (K,) float64, increasing, with the same welding and attributes as its chain
     (:func:`pipelines.lod.build_lod_chain`), simplified from level 0 each time.
@@ -264,7 +265,12 @@ def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: 
     monotone), the part of each result's area that faces away from level 0
     (:func:`_flipped_fraction`) float64, and the number of triangles that was judged on (0
     and 0 where not judged: at points with ``facing_from`` triangles or more, except the last
-    of them; by default every point is judged)."""
+    of them; by default every point is judged).
+
+    ``enough``: the points are simplified from the largest error down, and once one keeps
+    ``enough`` triangles or more the smaller errors are not simplified: their counts are given
+    as the mesh's whole count (a share is capped below ``enough`` anyway, so only the point
+    where the curve reaches it matters)."""
     from assetpipe.pipelines.closest_point import ClosestTriangles
     from assetpipe.pipelines.lod import _attributes, _normalised, weld_for_simplification
 
@@ -282,19 +288,22 @@ def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: 
     engine = ClosestTriangles.build(local64, tri0) if tri0.size else None
     ref_normals = _face_normals(local64, tri0)[0]
     counts, flipped, judged = (np.zeros(errors.shape[0]) for _ in range(3))
-    outs = []
-    for k, e in enumerate(errors):
+    outs: list = [None] * errors.shape[0]
+    for k in range(errors.shape[0] - 1, -1, -1):
         out, _ = simp.simplify(pos32, welded, options.min_triangles, attributes=attrs,
                                attribute_weights=weights, lock_border=options.lock_border,
-                               target_error=float(e) / unit / scale)
+                               target_error=float(errors[k]) / unit / scale)
         counts[k] = min(out.shape[0], idx.shape[0])
-        outs.append(out)
+        outs[k] = out
+        if counts[k] >= enough:
+            counts[:k] = idx.shape[0]
+            break
     # the facing is judged only where a share can fall (:func:`_facing_floor`): below
     # ``facing_from`` triangles and at the point nearest above it
     above = np.flatnonzero(counts >= facing_from)
     first = int(above.max()) if above.size else 0
     for k in range(first, errors.shape[0]):
-        if engine is not None and outs[k].size:
+        if engine is not None and outs[k] is not None and outs[k].size:
             flipped[k], judged[k] = _flipped_fraction(local64, outs[k], ref_normals, engine)
     return counts, flipped, judged
 
@@ -350,7 +359,8 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
     first = options.ratios[1] if len(options.ratios) > 1 else 0.0
     def curve(i: int):
         p, ix, uv, nm, ot = meshes[i]
-        return _count_curve(p, ix, uv, nm, ot, grid, options, facing_from=first * m[i])
+        return _count_curve(p, ix, uv, nm, ot, grid, options, facing_from=first * m[i],
+                            enough=math.floor((1.0 - options.min_saving) * m[i]))
 
     # each curve is a pure function of its mesh: on ``threads`` threads, largest first
     # (meshoptimizer and the BVH query release the GIL); the result does not depend on them
