@@ -261,6 +261,26 @@ def test_facing_floor_stops_where_the_flipped_part_rises():
     assert _facing_floor(counts, rising, judged, 2000.0) == 0.0
 
 
+def test_count_curve_stops_once_a_mesh_keeps_enough():
+    """The curve is simplified from the largest error down; once a point keeps ``enough``
+    triangles the finer points are not simplified (given as the whole count): every point from
+    there on is the same as the full curve's, and a share capped below ``enough`` cannot tell."""
+    from assetpipe.pipelines.lod_model import _count_curve
+
+    v, f = _bumpy_sphere(4, seed=7)
+    grid = np.geomspace(1e-5, 0.5, 16)
+    opts = LodOptions()
+    full = _count_curve(v, f, None, None, (), grid, opts)
+    enough = math.floor(0.9 * len(f))
+    part = _count_curve(v, f, None, None, (), grid, opts, enough=enough)
+    stop = int(np.flatnonzero(full[0] >= enough).max())  # the coarsest point keeping enough
+    assert stop > 0  # the fixture's finest points keep almost everything: some are skipped
+    for a, b in zip(full, part):
+        assert (a[stop:] == b[stop:]).all()
+    assert (part[0][:stop] == len(f)).all()
+    assert (full[0][:stop] >= enough).all()  # what was skipped kept at least enough
+
+
 def test_balancing_does_not_fold_thin_parts(monkeypatch):
     """A thin bent tube (a leg) beside a bumpy sphere: meshoptimizer's error rates the tube's
     cross-section cheap, so a budget shared by that error alone cuts the tube until it folds
