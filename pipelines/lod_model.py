@@ -309,7 +309,7 @@ def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: 
 
 
 def _facing_floor(counts: np.ndarray, flipped: np.ndarray, judged: np.ndarray, even: float) -> float:
-    """The fewest triangles below ``even`` (a mesh's even share of a level) it may be given
+    """The fewest triangles a mesh may be given at a level where its even share is ``even``
     without more of its area facing away from level 0 than at the even share (0: no limit).
 
     ``counts``/``flipped``/``judged``: a mesh's curve (:func:`_count_curve`). The part at the
@@ -317,7 +317,10 @@ def _facing_floor(counts: np.ndarray, flipped: np.ndarray, judged: np.ndarray, e
     triangles at or above ``even``); a count is allowed while the curve stays within that part
     plus twice its standard error (the difference a draw of that many triangles shows by
     chance), with the crossing interpolated in log count: a part is given fewer triangles than
-    one ratio would give it only where its facing is not measurably worse."""
+    one ratio would give it only where its facing is not measurably worse. Where the part
+    turned away already rises between that point and the next, the crossing, and so the
+    floor, can lie above ``even``: such a part keeps more than its even share while the budget
+    allows (:func:`balanced_ratios` caps the floor at ``even`` where the budget does not)."""
     order = np.argsort(-counts, kind="stable")  # most triangles first
     c, f, n = counts[order], flipped[order], np.maximum(judged[order], 1.0)
     live = c > 0
