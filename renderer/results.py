@@ -31,6 +31,12 @@ class ValidateOptions:
     checks: tuple[str, ...] = ()  # empty: every registered check
     validation_layer: bool = True
     bbox_tolerance_px: float = 2.0
+    # a silhouette or LOD comparison that fails is rendered again at this many times the pixels a
+    # side, the same picture sampled finer, and judged in the same pixel units: geometry thinner
+    # than a pixel (wires, antennae) covers pixel centres only here and there, so its picture at
+    # one sample a pixel is dotted and the dots fall differently for LOD0 and LOD k, or miss a
+    # thin extreme by more than a pixel (renderer/checks/silhouette.py, lods.py). 1: no second look
+    supersample: int = 4
     source_root: str | None = None  # where to look for the sources (searched recursively)
     source_max_xor: float = 0.03
     source_max_unexplained: float = 0.002

@@ -167,3 +167,46 @@ def make_asset(kind: str) -> GltfBuilder:
 def write_assets(folder: Path, kinds: tuple[str, ...] = KINDS) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     return [make_asset(k).write_glb(folder / f"{k}.glb") for k in kinds]
+
+
+def write_wires_obj(path: Path, wires: int = 20, radius: float = 0.004, seed: int = 1) -> Path:
+    """An OBJ of ``wires`` thin bent tubes (24 sides, 40 rings, ``radius``) around a bumpy
+    sphere of radius 0.5: at 256 px the wires are under a pixel wide, so a picture at one sample
+    a pixel shows them dotted (what the silhouette and lods checks' second look is for)."""
+    rng = np.random.default_rng(seed)
+    verts, faces, off = [], [], 0
+
+    def add(v: np.ndarray, f: np.ndarray) -> None:
+        nonlocal off
+        verts.append(v)
+        faces.append(f + off)
+        off += len(v)
+
+    t = np.linspace(0, 1, 40)
+    centre = np.stack([np.sin(3 * t) * 0.6, np.cos(2 * t) * 0.4, t * 1.5], 1)
+    d = np.gradient(centre, axis=0)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    a = np.cross(d, [1.0, 0, 0])
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = np.cross(d, a)
+    th = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.cos(th)[None, :, None] * a[:, None] + np.sin(th)[None, :, None] * b[:, None]
+    tube = np.vstack([(centre[:, None] + radius * ring).reshape(-1, 3), centre[0], centre[-1]])
+    i, j = np.meshgrid(np.arange(39), np.arange(24), indexing="ij")
+    v0, v1 = i * 24 + j, i * 24 + (j + 1) % 24
+    s, last, n = np.arange(24), 39 * 24, 40 * 24
+    tf = np.concatenate([np.stack([v0, v1, v1 + 24], -1).reshape(-1, 3),
+                         np.stack([v0, v1 + 24, v0 + 24], -1).reshape(-1, 3),
+                         np.stack([np.full(24, n), (s + 1) % 24, s], 1),
+                         np.stack([np.full(24, n + 1), last + s, last + (s + 1) % 24], 1)])
+    for _ in range(wires):
+        rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        if np.linalg.det(rot) < 0:
+            rot[:, 0] *= -1
+        add(tube @ rot.T + rng.normal(size=3) * 0.3, tf)
+    sp, _, _, _, si = sphere(48, 24)
+    add(sp * 0.5 + [1.5, 0, 0], si.reshape(-1, 3))
+    with open(path, "w") as fh:
+        fh.writelines("v %.6f %.6f %.6f\n" % tuple(p) for p in np.concatenate(verts))
+        fh.writelines("f %d %d %d\n" % tuple(f) for f in np.concatenate(faces) + 1)
+    return path
