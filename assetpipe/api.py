@@ -183,5 +183,9 @@ def load(model_json: PathLike) -> LoadedModel:
         for mesh in m.meshes)
     materials = tuple(side_mats.get(mat.id, {"id": mat.id, "baseColorFactor": list(mat.base_color)})
                       for mat in m.materials)
-    return LoadedModel(id=m.id, positions=m.positions, uvs=m.uvs, indices=m.indices, meshes=meshes,
+    # the renderer draws relative to an origin (renderer.loader.frame_origin); the model's own frame
+    # is what this API gives: the stored positions, plus a recentred model's positionOffset
+    positions = m.positions if not m.position_offset.any() else \
+        (m.positions.astype(np.float64) + m.position_offset).astype(np.float32)
+    return LoadedModel(id=m.id, positions=positions, uvs=m.uvs, indices=m.indices, meshes=meshes,
                        materials=materials, sidecar=m.sidecar)

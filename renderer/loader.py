@@ -19,6 +19,7 @@ decoded with Pillow as level 0 only, and a note says so.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -153,8 +154,10 @@ class RenderModel:
     notes: list[str] = field(default_factory=list)
     sidecar: dict[str, Any] = field(default_factory=dict)
     root: Path = Path(".")
-    # a recentred model's sidecar positionOffset (float64), already added to ``positions``,
-    # the bounds and the centres: the model is drawn in its source's frame, like the source
+    # the drawing frame's origin in the model's frame (float64, :func:`frame_origin`): positions,
+    # bounds and centres are relative to it, so the GPU's float32 transforms work on small
+    # numbers (camera-relative drawing); add it for the model's (and the source's) frame. Zero
+    # for a model near the origin; a recentred model's positionOffset; a far model's centre
     position_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     uvs1: np.ndarray | None = None  # (N, 2) the layout's uv1 (the second UV set), when it has one
 
@@ -174,6 +177,36 @@ def _read_json(path: Path) -> Any:
         return json.loads(path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise AssetError(path, f"not valid JSON: {exc}") from exc
+
+
+#: a model whose bounding-box centre is farther from the origin than this many bounding-sphere
+#: radii is drawn relative to that centre: float32 arithmetic at a distance |c| rounds by up to
+#: |c| x 2^-24, which is then over 1e-6 of the radius, and a 2e6-unit offset put a 3-unit model's
+#: silhouette 4-6 px (of 256) from its CPU projection by the GPU's transform alone
+FAR_RADII = 16.0
+
+
+def frame_origin(side: dict[str, Any] | None) -> np.ndarray:
+    """The origin the validator draws a built model relative to (float64 (3,), model frame):
+    the sidecar's ``positionOffset`` for a recentred model (its stored positions are already
+    relative to it); for a model whose bounds centre is more than :data:`FAR_RADII` radii from
+    the origin, that centre rounded to float32 (so a stored float32 position minus it is exact
+    on the far axes); else zero. The same origin is taken from the source (the source check
+    draws both in one frame)."""
+    side = side if isinstance(side, dict) else {}
+    off = side.get("positionOffset")
+    if off is not None:
+        o = np.asarray(off, np.float64).reshape(-1)
+        return o if o.shape == (3,) and np.isfinite(o).all() else np.zeros(3)
+    b = side.get("bounds") if isinstance(side.get("bounds"), dict) else {}
+    try:
+        c = np.asarray(b.get("center", (0.0, 0.0, 0.0)), np.float64).reshape(3)
+        r = float(b.get("radius", 0.0) or 0.0)
+    except (TypeError, ValueError):
+        return np.zeros(3)
+    if not (np.isfinite(c).all() and math.isfinite(r)) or float(np.abs(c).max()) <= FAR_RADII * max(r, 1e-30):
+        return np.zeros(3)
+    return c.astype(np.float32).astype(np.float64)
 
 
 def read_sidecar(model_json: Path) -> dict[str, Any] | None:
@@ -472,15 +505,18 @@ def load_built_model(model_json: Path, load_textures: bool = True,
         bmax = positions.max(0).astype(np.float64) if len(positions) else np.zeros(3)
     center = np.asarray(b.get("center", (bmin + bmax) / 2), np.float64)
     radius = float(b.get("radius", np.linalg.norm(bmax - bmin) / 2))
-    offset = np.zeros(3)
     if side.get("positionOffset") is not None:  # a recentred model (docs/FORMAT.md, "Precision")
-        offset = np.asarray(side["positionOffset"], np.float64).reshape(3)
-        if not np.isfinite(offset).all():
-            raise AssetError(model_json, "sidecar positionOffset is not finite")
-        positions = (positions.astype(np.float64) + offset).astype(np.float32)
-        bmin, bmax, center = bmin + offset, bmax + offset, center + offset
+        stored = np.asarray(side["positionOffset"], np.float64).reshape(-1)
+        if stored.shape != (3,) or not np.isfinite(stored).all():
+            raise AssetError(model_json, "sidecar positionOffset is not three finite numbers")
+    # drawn relative to frame_origin: a recentred model as stored (positions, bounds and centres
+    # are relative to its positionOffset), a far one shifted here in float64
+    offset = frame_origin(side)
+    if side.get("positionOffset") is None and offset.any():
+        positions = (positions.astype(np.float64) - offset).astype(np.float32)
+        bmin, bmax, center = bmin - offset, bmax - offset, center - offset
         for m in meshes:
-            m.center = m.center + offset
+            m.center = m.center - offset
     return RenderModel(id=str(seed.get("id", model_json.stem)), positions=positions, uvs=uvs, colors=colors,
                        indices=indices, meshes=meshes, materials=materials, bounds_min=bmin, bounds_max=bmax,
                        center=center, radius=radius, notes=notes, sidecar=side, root=root, position_offset=offset,

@@ -171,11 +171,14 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
                                                               "emissive"))), uv, colors)
 
 
-def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None) -> RenderModel:
+def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | None = None,
+                      origin: np.ndarray | None = None) -> RenderModel:
     """Import ``path`` with trimesh, flatten its scene, and return it as a RenderModel.
 
     ``flat=True`` ignores materials (one white opaque material). Points and lines are dropped.
-    ``decoded``: a per-model cache shared with the checks (see ``_rgba_of``).
+    ``decoded``: a per-model cache shared with the checks (see ``_rgba_of``). ``origin``
+    (float64 (3,)): positions, bounds and centres are made relative to it in float64, before
+    float32, as the built model's are (``loader.frame_origin``; recorded as ``position_offset``).
     """
     import trimesh  # noqa: PLC0415
 
@@ -236,6 +239,8 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
     base = first = 0
     for k, (transform, gname, g) in enumerate(instances):
         v = np.asarray(g.vertices, np.float64) @ transform[:3, :3].T + transform[:3, 3]
+        if origin is not None:
+            v = v - origin
         f = np.asarray(g.faces, np.int64)
         if np.linalg.det(transform[:3, :3]) < 0:
             f = f[:, ::-1]
@@ -278,6 +283,7 @@ def load_source_model(path: Path, flat: bool = False, decoded: dict[str, Any] | 
                        bounds_min=lo, bounds_max=hi, center=(lo + hi) / 2,
                        radius=float(np.linalg.norm(hi - lo) / 2), notes=notes, root=path.parent,
                        uvs1=np.concatenate(uvs1) if on_uv1 else None,
+                       position_offset=np.zeros(3) if origin is None else np.asarray(origin, np.float64),
                        sidecar={"undrawnRoles": sorted(skip),
                                 "referenceUvs": np.concatenate(ref_uvs) if from_gltf else None,
                                 "referenceUvMask": np.concatenate(ref_mask) if from_gltf else None, "sparseApplied": diffuse is not None and any(

@@ -93,3 +93,22 @@ def test_decode_layout_with_colour() -> None:
     raw = np.array([[1, 2, 3, 0.5, 0.25, 1, 1]], "<f4").tobytes()
     pos, uv, col = decode_vertices(raw, layout, Path("x.vtx"))
     assert pos.tolist() == [[1, 2, 3]] and uv.tolist() == [[0, 0]] and col.tolist() == [[0.5, 0.25, 1, 1]]
+
+
+def test_frame_origin():
+    """Where the validator draws a built model from: a recentred model's positionOffset, a far
+    model's centre on float32's grid, else the origin."""
+    from assetpipe.renderer.loader import FAR_RADII, frame_origin
+
+    assert frame_origin({"positionOffset": [1e7, 2.5, -3.0]}).tolist() == [1e7, 2.5, -3.0]
+    near = {"bounds": {"center": [10.0, 0.0, 0.0], "radius": 1.0}}
+    assert not frame_origin(near).any()  # 10 radii: float32 draws it as well as at the origin
+    far_c = [2000000.1, -1000000.3, 5.0]
+    o = frame_origin({"bounds": {"center": far_c, "radius": 3.0}})
+    assert o.tolist() == np.float32(far_c).astype(np.float64).tolist() and o.dtype == np.float64
+    edge = FAR_RADII * 2.0
+    assert not frame_origin({"bounds": {"center": [edge, 0, 0], "radius": 2.0}}).any()
+    assert frame_origin({"bounds": {"center": [edge * 1.01, 0, 0], "radius": 2.0}}).any()
+    for bad in (None, {}, {"bounds": {"center": "x"}}, {"bounds": {"center": [float("nan"), 0, 0], "radius": 1}},
+                {"positionOffset": [1, 2]}):
+        assert not frame_origin(bad).any()

@@ -6,6 +6,7 @@ model that loses every triangle fails; duplicate triangles are dropped, counted,
 from __future__ import annotations
 
 import json
+import math
 import time
 
 import numpy as np
@@ -79,10 +80,15 @@ def test_recenter_keeps_a_far_sphere_whole_and_the_loader_puts_it_back(tmp_path)
     dist, _ = cKDTree(pos).query(world)
     assert dist.max() <= 2 * np.sqrt(3) * np.spacing(np.float32(1.0))  # a rounding of each local coordinate
     assert vtx.shape[0] == np.unique(pos, axis=0).shape[0]  # no vertex lost (welded: seam copies joined)
-    # the loader adds the offset: it draws in the source's frame, within float32's step at 1e7
+    # the loader keeps the stored positions, relative to the offset (the renderer draws camera-
+    # relative): with the offset added they are the source's, to float32's step at radius 1
+    assert np.max(np.abs(model.positions.astype(np.float64) + model.position_offset - world)) == 0.0
+    np.testing.assert_allclose(model.center + model.position_offset, center, atol=1e-6)
+    # the public loader gives the model's frame, float32 at 1e7 (as before)
+    from assetpipe.api import load
+
     step = float(np.spacing(np.float32(offset * 1.5)))
-    assert np.max(np.abs(model.positions.astype(np.float64) - world)) <= step
-    np.testing.assert_allclose(model.center, center, atol=step)
+    assert np.max(np.abs(load(tmp_path / "out" / "far.json").positions.astype(np.float64) - world)) <= step
     # without --recenter the same file warns and loses most of its triangles (the finding)
     plain = run_build([tmp_path / "far.obj"], tmp_path / "out2", NO_LOD, cache_dir=tmp_path / "c")
     s2 = _sidecar(tmp_path / "out2", "far")
@@ -205,3 +211,41 @@ def test_two_million_duplicate_faces_near_linear():
     out, n = drop_duplicate_triangles(tris)
     assert out.shape[0] == 1 and n == 1_999_999
     assert t_dup < 8 * t_sort, f"{t_dup:.3f} s against a 2M sort's {t_sort:.3f} s"
+
+
+@pytest.mark.vulkan
+@pytest.mark.parametrize("recenter", [True, False])
+def test_a_model_far_from_the_origin_validates(tmp_path, recenter, monkeypatch):
+    """A 3-unit bumpy sphere 2e6 units from the origin, as OBJ (float64 text). Drawn in float32
+    at 2e6 its silhouette sat 4-6 px from the CPU projection, the recentred build's bounds were
+    "outside" by the loader's float32 rounding, and its LOD levels differed from LOD0 by
+    thousands of pixels: the GPU's rounding, not the model's. Drawn relative to its centre
+    (renderer.loader.frame_origin) every check passes, with --recenter and without (the bounds'
+    9-digit printing is then allowed for at the coordinates' magnitude)."""
+    from assetpipe.renderer.batch import validate_model
+    from assetpipe.renderer.loader import frame_origin, load_built_model
+    from assetpipe.renderer.validate import ValidateOptions
+
+    pos, tris, _ = uv_sphere(96, 48, r=3.0, center=(2e6, -1e6, 5e5))
+    c = pos.mean(0)
+    pos = c + (pos - c) * (1 + 0.02 * np.sin(7 * (pos - c)).sum(1, keepdims=True) / 3)
+    write_obj(tmp_path / "far.obj", pos, tris)
+    opts = BuildOptions(mesh=MeshOptions(recenter=recenter))
+    report = run_build([tmp_path / "far.obj"], tmp_path / "out", opts, cache_dir=tmp_path / "c")
+    assert not report.failed, [r.error for r in report.failed]
+    model_json = tmp_path / "out" / "far.json"
+    side = _sidecar(tmp_path / "out", "far")
+    origin = frame_origin(side)
+    assert np.abs(origin - (pos.min(0) + pos.max(0)) / 2).max() < 1.0  # drawn about its centre
+    m = load_built_model(model_json, load_textures=False)
+    assert np.abs(m.positions).max() < 10 and np.abs(m.center).max() < 1.0  # small numbers on the GPU
+    r = validate_model(model_json, ValidateOptions(source_root=str(tmp_path)), isolate=False)
+    assert r.passed, r.failures()
+    assert r.check("source").status == "pass" and r.check("lods").status == "pass"
+    if not recenter:  # the control: drawn at 2e6 in float32, the same good model fails
+        import assetpipe.renderer.loader as loader
+
+        monkeypatch.setattr(loader, "FAR_RADII", math.inf)
+        assert not frame_origin(side).any()
+        r = validate_model(model_json, ValidateOptions(source_root=str(tmp_path)), isolate=False)
+        assert not r.passed and r.check("silhouette").status == "fail", r.to_json()

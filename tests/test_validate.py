@@ -233,12 +233,14 @@ def test_reports_name_measured_value_and_tolerance(tmp_path: Path, cube: Path) -
     _shrink_bounds(cube, 0.9)
     r = validate_model(cube, OPTS, isolate=False)
     b = r.check("bounds")
-    assert b is not None and b.status == "fail" and b.measured["outsideBox"] > b.tolerance["outsideBox"] == 1e-5
+    # 1e-5 of the diagonal plus the 9-digit printing at the cube's coordinates (5e-9 of them)
+    assert b is not None and b.status == "fail" and b.measured["outsideBox"] > b.tolerance["outsideBox"]
+    assert 1e-5 < b.tolerance["outsideBox"] < 1.001e-5
     write_json_report([r], tmp_path / "r.json")
     write_junit_report([r], tmp_path / "r.xml")
     fail = json.loads((tmp_path / "r.json").read_text())["failures"]
     entry = next(f for f in fail if f["check"] == "bounds")
-    assert entry["model"] == "cube" and entry["tolerance"]["outsideBox"] == 1e-5
+    assert entry["model"] == "cube" and entry["tolerance"]["outsideBox"] == b.tolerance["outsideBox"]
     assert entry["measured"]["outsideBox"] == pytest.approx(b.measured["outsideBox"])
     case = next(c for c in ET.parse(tmp_path / "r.xml").getroot().iter("testcase") if c.get("name") == "bounds")
     assert case.find("failure").get("message").startswith("bounds: outsideBox measured ")
@@ -347,3 +349,49 @@ def test_wires_thinner_than_a_pixel_are_judged_on_a_finer_sampling(tmp_path: Pat
     second = [v["supersampledBoxErrorPx"] for v in sil.figures["views"] if "supersampledBoxErrorPx" in v] + \
              [lv["supersampledUnexplainedPx"] for lv in lods.figures["perLevel"] if "supersampledUnexplainedPx" in lv]
     assert len(second) >= 2, (sil.figures, lods.figures)  # the second look decided both
+
+
+def test_a_ring_is_judged_where_it_has_geometry(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A thin ring (torus, radius 1, tube 0.03): at LOD1's switch distance the lods picture, capped
+    at lod_max_render_px, shows only the middle of the model, where a ring has nothing. The check
+    then aims at the drawn LOD0 vertex nearest the centre (same distance and field of view)
+    instead of failing with "LOD0 covers no pixel"; the control without that aim fails."""
+    import trimesh
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+    from assetpipe.renderer.checks import lods as lods_check
+
+    trimesh.creation.torus(1.0, 0.03, major_sections=256, minor_sections=16).export(tmp_path / "ring.obj")
+    r = CliRunner().invoke(main, ["build", str(tmp_path / "ring.obj"), "-o", str(tmp_path / "out"), "--cache",
+                                  str(tmp_path / "cache"), "-j", "1", "-q"])
+    assert r.exit_code == 0, r.output
+    model = tmp_path / "out" / "ring.json"
+    res = validate_model(model, ValidateOptions(checks=("load", "lods")), isolate=False)
+    lods = res.check("lods")
+    assert lods.status == "pass", lods.messages
+    assert any(lv.get("aimedAtNearestVertex") for lv in lods.figures["perLevel"]), lods.figures
+    assert all(lv["areaPx"] > 0 for lv in lods.figures["perLevel"])
+    monkeypatch.setattr(lods_check, "nearest_drawn", lambda model, point: None)
+    res = validate_model(model, ValidateOptions(checks=("load", "lods")), isolate=False)
+    assert res.check("lods").status == "fail" and "covers no pixel" in " ".join(res.check("lods").messages)
+
+
+def test_an_inside_out_model_is_named_as_such(tmp_path: Path) -> None:
+    """A sphere whose triangles face inward shows only back faces from outside: the lods check,
+    which judges front faces, says so instead of "LOD0 covers no pixel"."""
+    import trimesh
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+
+    s = trimesh.creation.icosphere(4)
+    s.invert()
+    s.export(tmp_path / "inside_out.obj")
+    r = CliRunner().invoke(main, ["build", str(tmp_path / "inside_out.obj"), "-o", str(tmp_path / "out"),
+                                  "--cache", str(tmp_path / "cache"), "-j", "1", "-q"])
+    assert r.exit_code == 0, r.output
+    res = validate_model(tmp_path / "out" / "inside_out.json", ValidateOptions(checks=("load", "lods")),
+                         isolate=False)
+    lods = res.check("lods")
+    assert lods.status == "fail" and "only back faces" in " ".join(lods.messages), lods.messages

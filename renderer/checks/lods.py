@@ -88,6 +88,16 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
 LOD_MAX_OPEN_EDGE_GROWTH = 0.05  # diagonals; see LodsCheck.reason
 
 
+def nearest_drawn(model, point: np.ndarray) -> np.ndarray | None:
+    """The LOD0 vertex a draw uses nearest ``point`` (float64 (3,)), or None when none is drawn."""
+    from .silhouette import drawn_positions  # noqa: PLC0415
+
+    p = drawn_positions(model, 0).astype(np.float64)
+    if not len(p):
+        return None
+    return p[int(np.argmin(np.einsum("ij,ij->i", p - point, p - point)))]
+
+
 def budget_for(options, area: float) -> float:
     """Unexplained pixels allowed where LOD0 covers ``area`` pixels."""
     return options.lod_max_unexplained_px + options.lod_max_unexplained_fraction * area
@@ -142,13 +152,29 @@ class LodsCheck(Check):
             fov = math.degrees(2 * math.atan((size / 2) / ppu))
             bad = area = differing = 0
             fine_bad: float | None = None
+            reaimed = back_only = False
             for view in views:
-                cam = fit_camera(model.center, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
+                aim = model.center
+                cam = fit_camera(aim, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
                 with ctx.timer("render"):
                     key = (view, distance, size, fov)
                     if key not in lod0:
-                        lod0[key] = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0))
-                    a = lod0[key]
+                        img = ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0)
+                        lod0[key] = (aim, compare.front(img), bool(compare.coverage(img).any()))
+                        if not lod0[key][2]:
+                            # the picture (capped at lod_max_render_px) shows only the middle of the
+                            # model, and a ring or a frame has nothing there: aim at the drawn LOD0
+                            # vertex nearest the centre instead, same distance and field of view
+                            near = nearest_drawn(model, model.center)
+                            if near is not None:
+                                c2 = fit_camera(near, model.radius, view, size, size, fov_y_deg=fov,
+                                                distance=distance)
+                                img = ctx.renderer.render(ctx.gpu, c2, mode="facing", lod=0)
+                                lod0[key] = (near, compare.front(img), bool(compare.coverage(img).any()))
+                    aim, a, seen = lod0[key]
+                    back_only = seen and not a.any()
+                    reaimed = reaimed or aim is not model.center
+                    cam = fit_camera(aim, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
                     b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
                 with ctx.timer("compare"):
                     view_bad = int(compare.unexplained(a, b, 1).sum())
@@ -161,7 +187,7 @@ class LodsCheck(Check):
                     # units: sub-pixels more than f from the other's silhouette, counted as 1/f^2
                     # of a pixel): geometry thinner than a pixel is dotted at one sample a pixel,
                     # and the dots of LOD0 and LOD k fall in different places; a hole stays
-                    fine = fit_camera(model.center, model.radius, view, size * f, size * f, fov_y_deg=fov,
+                    fine = fit_camera(aim, model.radius, view, size * f, size * f, fov_y_deg=fov,
                                       distance=distance)
                     with ctx.timer("render"):
                         a_f = compare.front(ctx.renderer.render(ctx.gpu, fine, mode="facing", lod=0))
@@ -188,9 +214,15 @@ class LodsCheck(Check):
                     "level": k, "openEdgeGrowth": round(growth, 5), "meshOpenEdgeGrowth": round(mesh_growth, 5), "switchDistance": switch, "renderDistance": round(distance, 6),
                     "renderPx": size, "triangles": model.triangles(k), "areaPx": area,
                     "differingPx": differing, "unexplainedPx": round(bad, 2), "budgetPx": round(budget, 1)})
+                if reaimed:  # LOD0 covered nothing in the middle of the model
+                    r.figures["perLevel"][-1]["aimedAtNearestVertex"] = True
                 if fine_bad is not None:  # the second look decided
                     r.figures["perLevel"][-1]["supersampledUnexplainedPx"] = round(fine_bad, 2)
-                if area == 0:
+                if area == 0 and back_only:
+                    r.worst("emptyLod0", 1, 0)
+                    r.messages.append(f"LOD{k}: LOD0 shows only back faces at {distance:.4g}: its triangles face "
+                                      "away from the eye (inside out? check the source's winding)")
+                elif area == 0:
                     r.worst("emptyLod0", 1, 0)
                     r.messages.append(f"LOD{k}: LOD0 covers no pixel at {distance:.4g}")
                 elif r.worst("unexplainedOverBudget", bad / max(budget, 1e-9), 1.0):

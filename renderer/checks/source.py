@@ -64,10 +64,12 @@ def start_source(ctx: Context, sidecar: dict[str, Any] | None = None) -> None:
         return  # load_source says why
     from concurrent.futures import ThreadPoolExecutor  # noqa: PLC0415
 
+    from ..loader import frame_origin  # noqa: PLC0415
     from ..source_model import load_source_model  # noqa: PLC0415
 
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="assetpipe-source")
-    ctx.cache["source_future"] = (src, pool.submit(load_source_model, src, decoded=ctx.cache))
+    ctx.cache["source_future"] = (src, pool.submit(load_source_model, src, decoded=ctx.cache,
+                                                   origin=frame_origin(sidecar)))
     pool.shutdown(wait=False)
 
 
@@ -85,7 +87,8 @@ def load_source(ctx: Context) -> tuple[Path | None, Any, str | None]:
         else:
             try:
                 with ctx.timer("load"):
-                    model = started[1].result() if started else load_source_model(src, decoded=ctx.cache)
+                    model = started[1].result() if started else load_source_model(
+                        src, decoded=ctx.cache, origin=ctx.model.position_offset)
                 ctx.cache["source"] = (src, model, None)
             except AssetpipeError as exc:
                 ctx.cache["source"] = (src, None, f"source not importable by trimesh: {exc}")
