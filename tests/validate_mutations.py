@@ -288,7 +288,7 @@ MUTATIONS: dict[str, tuple[Callable[[Path], None], tuple[str, ...], str]] = {
     "missing mip level": (missing_mip_level, ("textures",), "missing levels"),
     "truncated mip level": (truncated_mip, ("textures", "load"), "KTX"),
     "black mip level": (black_mip_level, ("textures",), "all black"),
-    "wrong winding": (wrong_winding, ("source", "lods"), "flipped winding|LOD0 covers no pixel"),
+    "wrong winding": (wrong_winding, ("source", "lods"), "flipped winding|LOD0 covers no pixel|only back faces"),
     "LOD level with a hole": (lod_hole, ("lods",), "differ from LOD0|a hole?"),
     "bounds do not contain the vertices": (bounds_too_small, ("bounds",), "outside the sidecar bounds"),
     "material id points nowhere": (material_id_nowhere, ("load",), "materialId"),
