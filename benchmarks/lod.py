@@ -5,6 +5,8 @@ Run:  .venv/bin/python benchmarks/lod.py            (everything; long: 1M sample
       .venv/bin/python benchmarks/lod.py --only Duck,stanford-bunny --no-big
       .venv/bin/python benchmarks/lod.py --only spider,beast --no-big --no-simplifiers
           --variants ours --no-recorded --samples 100000   (TABLE 1 for a few cells, quickly)
+      .venv/bin/python benchmarks/lod.py --cad --no-corpus --no-big --no-simplifiers --no-recorded
+          (TABLE 1 on generated CAD-style models the corpus does not hold: benchmarks/cad_models.py)
 
 Simplifier table: for every file (loaded with trimesh and merged into one mesh, node
 transforms applied) and every simplifier (meshopt, meshopt-attr, meshopt+lock_border, sloppy,
@@ -24,7 +26,8 @@ whole-model reference. For equal triangle counts every output mesh uses gltfpack
 ratios (its output count / input count), ``min_triangles=1`` and no error budget. Variants:
 ``ours`` (default options), ``ours-chained`` and ``ours-direct`` (levels only from the level
 above / only from level 0), ``ours-per-mesh`` (no merging, chained, duplicates kept: how the
-build made levels before). Their time is the whole chain's (all levels): with the build's
+build made levels before), ``ours-one-ratio`` (every mesh at every ratio: ``balance_meshes``
+off). Their time is the whole chain's (all levels): with the build's
 measurement for ``ours``, without it for the others (``--measure-variants``: with it; their
 levels only differ where a stalled step picks among pruning and sloppy).
 
@@ -74,11 +77,11 @@ RESULTS = REPO / "benchmarks" / "results"
 RATIOS = (1 / 2, 1 / 4, 1 / 8, 1 / 16)
 SIMPLIFIERS = ("meshopt", "meshopt-attr", "meshopt+lock_border", "sloppy", "fast-simplification")
 #: our variants in the comparison with gltfpack: the default; levels only from the level above;
-#: only from level 0; the way the build made them before merging (one chain per mesh); and a
-#: model's meshes sharing each level's budget by error (LodOptions.balance_meshes, off by default)
+#: only from level 0; the way the build made them before merging (one chain per mesh); and every
+#: mesh at every ratio (LodOptions.balance_meshes off; on by default since LOD step 17)
 VARIANTS = {"ours": {}, "ours-chained": {"chain": "chained"}, "ours-direct": {"chain": "direct"},
             "ours-per-mesh": {"merge_meshes": False, "chain": "chained", "dedupe_triangles": False},
-            "ours-balanced": {"balance_meshes": True}}
+            "ours-one-ratio": {"balance_meshes": False}}
 MIN_TRIANGLES = 300  # corpus files below this are too small to say anything
 
 
@@ -284,6 +287,10 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="4 small corpus meshes, no 1M mesh")
     ap.add_argument("--only", help="comma-separated corpus folder names")
     ap.add_argument("--no-big", action="store_true", help="skip the generated 1M-triangle mesh")
+    ap.add_argument("--cad", action="store_true",
+                    help="also the generated CAD-style models of benchmarks/cad_models.py (an assembly "
+                         "of 62 small parts, a piping plant): models the corpus does not hold")
+    ap.add_argument("--no-corpus", action="store_true", help="no corpus files (with --cad: those alone)")
     ap.add_argument("--no-gltfpack", action="store_true")
     ap.add_argument("--measure-variants", action="store_true",
                     help="build the ours-chained/-direct/-per-mesh variants with error measurement too")
@@ -312,11 +319,17 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="lodbench-"))
 
     meshes = []
-    for name, path in corpus_files(only):
+    for name, path in ([] if args.no_corpus else corpus_files(only)):
         m = load_merged(path)
         if m is None or len(m[1]) < MIN_TRIANGLES:
             continue
         meshes.append((name, path, m))
+    if args.cad:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from cad_models import write_cad_models  # noqa: PLC0415 - beside this file
+
+        for name, path in write_cad_models(tmp / "cad"):
+            meshes.append((name, path, load_merged(path)))
     if not (args.quick or args.no_big):
         import trimesh
 
@@ -383,12 +396,12 @@ def main() -> int:
                 ratios = (1.0, *[max(g / m_build, 1e-9) for _, g, _ in gp])
                 for variant, extra in variants.items():
                     # the build's measurement (a bound) only matters to "ours" and
-                    # "ours-balanced" (they pick among chained and direct candidates by
+                    # "ours-one-ratio" (they pick among chained and direct candidates by
                     # measurement); the other variants make the same levels without it, and
                     # are timed without it
                     opts = LodOptions(ratios=ratios, min_triangles=1, max_error=None,
                                       error_samples=min(args.samples, DEFAULT_LOD_OPTIONS.error_samples),
-                                      measure=variant in ("ours", "ours-balanced") or args.measure_variants, **extra)
+                                      measure=variant in ("ours", "ours-one-ratio") or args.measure_variants, **extra)
                     t = time.perf_counter()
                     lm = build_model_lods(build, opts)
                     dt = time.perf_counter() - t

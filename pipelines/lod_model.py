@@ -413,20 +413,15 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
             c = share(hi)
         else:
             c = share(lo)
-        # where the curves stop above the budget (meshoptimizer stalls: borders, seams), every
-        # mesh gives up the same share of what is left, below its curve: its chain then tries
-        # pruning and the sloppy simplifier there, as with one ratio for every mesh
+        # where the curves stop above the budget at every error (meshoptimizer stalls: borders,
+        # seams, many small closed parts), the largest error does not say how to share it: it
+        # is where the parts that can still go collapse (a box below its 12 triangles), while the
+        # stalled ones stay put. Every mesh then gets its even share, as with one ratio, and its
+        # chain's pruning and sloppy candidates take it there. (Giving up the same part of every
+        # share instead put the boxes of a generated assembly at 10 of their 24 triangles at
+        # 1/16: 11% of the model's diagonal against 1.4% with even shares.)
         if float((w * c).sum()) > budget:
-            # the same share s of every mesh above its floor: the largest s that fits
-            fl = np.minimum(np.maximum(floor, np.minimum(facing, r * m)), c)
-            s_lo, s_hi = 0.0, 1.0
-            for _ in range(60):
-                s_mid = 0.5 * (s_lo + s_hi)
-                if (w * np.maximum(fl, s_mid * c)).sum() > budget:
-                    s_hi = s_mid
-                else:
-                    s_lo = s_mid
-            c = np.maximum(fl, s_lo * c)
+            c = np.minimum(r * m, prev)
         # never below what a chain can make (a mesh left without the level would keep all of
         # its triangles there), never above the previous level (its chain then ends)
         c = np.minimum(np.maximum(np.floor(c), floor), prev)

@@ -308,6 +308,33 @@ def test_balancing_does_not_fold_thin_parts(monkeypatch):
     assert tube_flipped(True) > 2 * one_ratio
 
 
+def test_stalled_curves_give_even_shares(monkeypatch):
+    """Where the count curves stay above a level's budget at every error (a part meshoptimizer
+    cannot take further), every mesh gets its even share, as with one ratio: giving up the same
+    part of every share put a generated assembly's boxes below their 12 triangles (11% of the
+    model's diagonal at 1/16 against 1.4%)."""
+    import assetpipe.pipelines.lod_model as lm
+
+    def curve(pos, idx, uv, normals, others, errors, options, facing_from=math.inf, enough=math.inf):
+        m = np.asarray(idx).reshape(-1, 3).shape[0]
+        k = errors.shape[0]
+        if m == 1000:  # stalls at 400: no error takes it further
+            counts = np.maximum(np.geomspace(m, 100, k), 400.0)
+        else:  # goes down smoothly
+            counts = np.geomspace(m, 4, k)
+        return counts, np.zeros(k), np.full(k, 100.0)
+
+    monkeypatch.setattr(lm, "_count_curve", curve)
+    a = (np.zeros((3, 3)), np.zeros((1000, 3), np.uint32), None, None, ())
+    b = (np.zeros((3, 3)), np.zeros((2000, 3), np.uint32), None, None, ())
+    opts = LodOptions(ratios=(1.0, 1 / 2, 1 / 8), min_triangles=1)
+    ratios = lm.balanced_ratios([a, b], [1, 1], opts)
+    # 1/2: the budget (1,500) fits the curves, shared by error (not the even 500 / 1,000)
+    assert ratios[0][1] != 0.5 and 1000 * ratios[0][1] + 2000 * ratios[1][1] <= 1500 + 2
+    # 1/8: the budget (375) is below the stalled mesh's 400 at every error: even shares
+    assert ratios[0][2] == pytest.approx(1 / 8, abs=1e-3) and ratios[1][2] == pytest.approx(1 / 8, abs=1e-3)
+
+
 def test_balancing_leaves_single_mesh_models_alone():
     v, f = _bumpy_sphere(3, seed=2)
     copies = [_part(v, f), _part(v + 5.0, f, key=1)]  # two materials: one distinct mesh and its copy
