@@ -395,3 +395,33 @@ def test_an_inside_out_model_is_named_as_such(tmp_path: Path) -> None:
                          isolate=False)
     lods = res.check("lods")
     assert lods.status == "fail" and "only back faces" in " ".join(lods.messages), lods.messages
+
+
+def test_a_one_sided_sheet_facing_away_is_judged_from_its_front(tmp_path: Path) -> None:
+    """A one-sided bumpy sheet facing away from the first view (a ceiling) shows only back faces
+    there: the lods check judges it from the opposite side, where its front is (a closed model
+    turned inside out shows back faces from both sides and still fails, test above)."""
+    import trimesh
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+
+    n = 30
+    x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n))
+    v = np.c_[x.ravel(), y.ravel(), 0.02 * np.sin(5 * x.ravel()) * np.cos(4 * y.ravel())]
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    f = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
+    for name, rot in (("ceiling", np.diag([1.0, -1.0, -1.0])), ("floor", np.eye(3))):
+        trimesh.Trimesh(v @ rot.T, f, process=False).export(tmp_path / f"{name}.obj")
+    r = CliRunner().invoke(main, ["build", str(tmp_path / "ceiling.obj"), str(tmp_path / "floor.obj"), "-o",
+                                  str(tmp_path / "out"), "--cache", str(tmp_path / "cache"), "-j", "1", "-q"])
+    assert r.exit_code == 0, r.output
+    flipped = {}
+    for name in ("ceiling", "floor"):
+        res = validate_model(tmp_path / "out" / f"{name}.json", ValidateOptions(checks=("load", "lods")),
+                             isolate=False)
+        lods = res.check("lods")
+        assert lods.status == "pass", (name, lods.messages)
+        flipped[name] = any(lv.get("seenFromOppositeSide") for lv in lods.figures["perLevel"])
+    assert flipped == {"ceiling": True, "floor": False}  # the first view sees the floor's front

@@ -126,6 +126,30 @@ class LodsCheck(Check):
               "(60 levels of 20 models)")
     needs_render = True
 
+    @staticmethod
+    def _lod0_picture(ctx: Context, model, view, size: int, fov: float, distance: float):
+        """(aim point, view direction, LOD0's front-facing pixels, whether LOD0 covers any pixel)
+        of the lods picture at ``distance``: from ``view`` at the model's centre; where that
+        picture (capped at lod_max_render_px: the middle of the model) covers nothing, as for a
+        ring or a frame, aimed at the drawn LOD0 vertex nearest the centre; where it shows only
+        back faces, as for a one-sided sheet (a ceiling, a wall) facing away, from the opposite
+        side. A closed model turned inside out shows back faces from both and stays so."""
+        def picture(aim, direction):
+            cam = fit_camera(aim, model.radius, direction, size, size, fov_y_deg=fov, distance=distance)
+            img = ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0)
+            return aim, direction, compare.front(img), bool(compare.coverage(img).any())
+
+        got = picture(model.center, view)
+        if not got[3]:
+            near = nearest_drawn(model, model.center)
+            if near is not None:
+                got = picture(near, view)
+        if got[3] and not got[2].any():
+            other = picture(got[0], tuple(-float(x) for x in view))
+            if other[2].any():
+                got = other
+        return got
+
     def run(self, ctx: Context) -> CheckResult:
         r = self.result()
         model, options = ctx.model, ctx.options
@@ -152,29 +176,19 @@ class LodsCheck(Check):
             fov = math.degrees(2 * math.atan((size / 2) / ppu))
             bad = area = differing = 0
             fine_bad: float | None = None
-            reaimed = back_only = False
+            reaimed = back_only = flipped_view = False
             for view in views:
                 aim = model.center
                 cam = fit_camera(aim, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
                 with ctx.timer("render"):
                     key = (view, distance, size, fov)
                     if key not in lod0:
-                        img = ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0)
-                        lod0[key] = (aim, compare.front(img), bool(compare.coverage(img).any()))
-                        if not lod0[key][2]:
-                            # the picture (capped at lod_max_render_px) shows only the middle of the
-                            # model, and a ring or a frame has nothing there: aim at the drawn LOD0
-                            # vertex nearest the centre instead, same distance and field of view
-                            near = nearest_drawn(model, model.center)
-                            if near is not None:
-                                c2 = fit_camera(near, model.radius, view, size, size, fov_y_deg=fov,
-                                                distance=distance)
-                                img = ctx.renderer.render(ctx.gpu, c2, mode="facing", lod=0)
-                                lod0[key] = (near, compare.front(img), bool(compare.coverage(img).any()))
-                    aim, a, seen = lod0[key]
+                        lod0[key] = self._lod0_picture(ctx, model, view, size, fov, distance)
+                    aim, seen_from, a, seen = lod0[key]
                     back_only = seen and not a.any()
                     reaimed = reaimed or aim is not model.center
-                    cam = fit_camera(aim, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
+                    flipped_view = flipped_view or seen_from is not view
+                    cam = fit_camera(aim, model.radius, seen_from, size, size, fov_y_deg=fov, distance=distance)
                     b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
                 with ctx.timer("compare"):
                     view_bad = int(compare.unexplained(a, b, 1).sum())
@@ -187,7 +201,7 @@ class LodsCheck(Check):
                     # units: sub-pixels more than f from the other's silhouette, counted as 1/f^2
                     # of a pixel): geometry thinner than a pixel is dotted at one sample a pixel,
                     # and the dots of LOD0 and LOD k fall in different places; a hole stays
-                    fine = fit_camera(aim, model.radius, view, size * f, size * f, fov_y_deg=fov,
+                    fine = fit_camera(aim, model.radius, seen_from, size * f, size * f, fov_y_deg=fov,
                                       distance=distance)
                     with ctx.timer("render"):
                         a_f = compare.front(ctx.renderer.render(ctx.gpu, fine, mode="facing", lod=0))
@@ -216,6 +230,8 @@ class LodsCheck(Check):
                     "differingPx": differing, "unexplainedPx": round(bad, 2), "budgetPx": round(budget, 1)})
                 if reaimed:  # LOD0 covered nothing in the middle of the model
                     r.figures["perLevel"][-1]["aimedAtNearestVertex"] = True
+                if flipped_view:  # LOD0 showed only back faces from the first view
+                    r.figures["perLevel"][-1]["seenFromOppositeSide"] = True
                 if fine_bad is not None:  # the second look decided
                     r.figures["perLevel"][-1]["supersampledUnexplainedPx"] = round(fine_bad, 2)
                 if area == 0 and back_only:
