@@ -62,22 +62,16 @@ def assembly(path: Path, seed: int = 7) -> Path:
 
 
 def _tube(points: np.ndarray, radius: float, sides: int = 24):
-    """A tube of ``sides`` around a polyline ``points`` (P, 3): (positions, faces), open ends."""
+    """A tube of ``sides`` around a polyline ``points`` (P, 3), open ends: a trimesh.Trimesh."""
+    import sys
+
     import trimesh
 
-    d = np.gradient(points, axis=0)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    a = np.cross(d, [0.3, 0.5, 0.8])
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b = np.cross(d, a)
-    th = np.linspace(0, 2 * np.pi, sides, endpoint=False)
-    ring = np.cos(th)[None, :, None] * a[:, None] + np.sin(th)[None, :, None] * b[:, None]
-    v = (points[:, None] + radius * ring).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(len(points) - 1), np.arange(sides), indexing="ij")
-    v0, v1 = i * sides + j, i * sides + (j + 1) % sides
-    f = np.concatenate([np.stack([v0, v1, v1 + sides], -1).reshape(-1, 3),
-                        np.stack([v0, v1 + sides, v0 + sides], -1).reshape(-1, 3)])
-    return trimesh.Trimesh(v, f, process=False)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from robust_models import tube  # noqa: PLC0415 - the tests' generated-model helpers
+
+    pos, faces = tube(points, radius, sides, caps=False, across=(0.3, 0.5, 0.8))
+    return trimesh.Trimesh(pos, faces, process=False)
 
 
 def pipes(path: Path, seed: int = 7) -> Path:

@@ -45,6 +45,37 @@ def uv_sphere(n_lon: int = 24, n_lat: int = 12, r: float = 1.0, center=(0.0, 0.0
     return p, np.array(tris, np.uint32), np.array(uv, np.float32)
 
 
+def tube(centre: np.ndarray, radius: float, sides: int = 24, caps: bool = True, across=(1.0, 0.0, 0.0)):
+    """A tube of ``sides`` around the polyline ``centre`` (P, 3): (positions (N, 3) float64,
+    faces (M, 3) int64), outward-facing; ``caps``: closed with a fan at each end; ``across``:
+    a direction never along the curve (the rings' first axis is across it)."""
+    centre = np.asarray(centre, np.float64)
+    d = np.gradient(centre, axis=0)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    a = np.cross(d, np.asarray(across, np.float64))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = np.cross(d, a)
+    th = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    ring = np.cos(th)[None, :, None] * a[:, None] + np.sin(th)[None, :, None] * b[:, None]
+    pos = (centre[:, None] + radius * ring).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(len(centre) - 1), np.arange(sides), indexing="ij")
+    v0, v1 = i * sides + j, i * sides + (j + 1) % sides
+    faces = [np.stack([v0, v1, v1 + sides], -1).reshape(-1, 3),
+             np.stack([v0, v1 + sides, v0 + sides], -1).reshape(-1, 3)]
+    if caps:
+        n, s, last = len(pos), np.arange(sides), (len(centre) - 1) * sides
+        faces += [np.stack([np.full(sides, n), (s + 1) % sides, s], 1),
+                  np.stack([np.full(sides, n + 1), last + s, last + (s + 1) % sides], 1)]
+        pos = np.vstack([pos, centre[0], centre[-1]])
+    return pos, np.concatenate(faces).astype(np.int64)
+
+
+def bent_curve(points: int = 40) -> np.ndarray:
+    """(points, 3) a bent curve about 1.7 long (a leg, a wire)."""
+    t = np.linspace(0, 1, points)
+    return np.stack([np.sin(3 * t) * 0.6, np.cos(2 * t) * 0.4, t * 1.5], 1)
+
+
 def write_obj(path: Path, pos, tris, uv=None) -> Path:
     """An OBJ with positions written exactly (repr: float64 round trip)."""
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(pos, np.float64).tolist()]

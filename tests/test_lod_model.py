@@ -200,25 +200,11 @@ def test_balanced_ratios_share_the_model_budget_by_error():
 
 
 def _bent_tube(rings: int = 40, sections: int = 24, radius: float = 0.003):
-    """A thin closed tube along a bent curve (a leg): (positions, faces), outward-facing."""
-    t = np.linspace(0, 1, rings)
-    c = np.stack([np.sin(3 * t) * 0.6, np.cos(2 * t) * 0.4, t * 1.5], 1)
-    d = np.gradient(c, axis=0)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    a = np.cross(d, [1.0, 0, 0])
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b = np.cross(d, a)
-    th = np.linspace(0, 2 * np.pi, sections, endpoint=False)
-    ring = np.cos(th)[None, :, None] * a[:, None] + np.sin(th)[None, :, None] * b[:, None]
-    pos = (c[:, None] + radius * ring).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(rings - 1), np.arange(sections), indexing="ij")
-    v0, v1 = i * sections + j, i * sections + (j + 1) % sections
-    f = [np.stack([v0, v1, v1 + sections], -1).reshape(-1, 3),
-         np.stack([v0, v1 + sections, v0 + sections], -1).reshape(-1, 3)]
-    n, s, last = len(pos), np.arange(sections), (rings - 1) * sections
-    f += [np.stack([np.full(sections, n), (s + 1) % sections, s], 1),
-          np.stack([np.full(sections, n + 1), last + s, last + (s + 1) % sections], 1)]
-    return np.vstack([pos, c[0], c[-1]]), np.concatenate(f).astype(np.uint32)
+    """A thin closed tube along a bent curve (a leg): (positions, faces uint32), outward-facing."""
+    from robust_models import bent_curve, tube
+
+    pos, faces = tube(bent_curve(rings), radius, sections)
+    return pos, faces.astype(np.uint32)
 
 
 def test_flipped_fraction_sees_faces_turned_away():

@@ -182,28 +182,14 @@ def write_wires_obj(path: Path, wires: int = 20, radius: float = 0.004, seed: in
         faces.append(f + off)
         off += len(v)
 
-    t = np.linspace(0, 1, 40)
-    centre = np.stack([np.sin(3 * t) * 0.6, np.cos(2 * t) * 0.4, t * 1.5], 1)
-    d = np.gradient(centre, axis=0)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    a = np.cross(d, [1.0, 0, 0])
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b = np.cross(d, a)
-    th = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    ring = np.cos(th)[None, :, None] * a[:, None] + np.sin(th)[None, :, None] * b[:, None]
-    tube = np.vstack([(centre[:, None] + radius * ring).reshape(-1, 3), centre[0], centre[-1]])
-    i, j = np.meshgrid(np.arange(39), np.arange(24), indexing="ij")
-    v0, v1 = i * 24 + j, i * 24 + (j + 1) % 24
-    s, last, n = np.arange(24), 39 * 24, 40 * 24
-    tf = np.concatenate([np.stack([v0, v1, v1 + 24], -1).reshape(-1, 3),
-                         np.stack([v0, v1 + 24, v0 + 24], -1).reshape(-1, 3),
-                         np.stack([np.full(24, n), (s + 1) % 24, s], 1),
-                         np.stack([np.full(24, n + 1), last + s, last + (s + 1) % 24], 1)])
+    from robust_models import bent_curve, tube
+
+    tube_pos, tf = tube(bent_curve(40), radius, 24)
     for _ in range(wires):
         rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
         if np.linalg.det(rot) < 0:
             rot[:, 0] *= -1
-        add(tube @ rot.T + rng.normal(size=3) * 0.3, tf)
+        add(tube_pos @ rot.T + rng.normal(size=3) * 0.3, tf)
     sp, _, _, _, si = sphere(48, 24)
     add(sp * 0.5 + [1.5, 0, 0], si.reshape(-1, 3))
     with open(path, "w") as fh:
