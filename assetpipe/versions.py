@@ -6,7 +6,7 @@ that step's cache key, so every cached result of the old version is rebuilt.
 
 IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate and repeated OBJ faces dropped (#13);
            # 4: meta has the bounding-box centre (--recenter)
-MESH = 4  # 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
+MESH = 5  # 5: inside-out closed meshes warned about; 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
           # 4: generated tangents are MikkTSpace (pipelines/tangents.py), w in glTF's convention
 LOD = 18  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget

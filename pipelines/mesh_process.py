@@ -125,6 +125,11 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
         degenerate += int(area_bad.sum())
         tris = tris[~area_bad]
 
+    if not double_sided and tris.shape[0] and inside_out(pos, tris):
+        warnings.append(f"{mesh.name}: a closed surface whose triangles face inward (negative volume): "
+                        "inside out? An engine that culls back faces shows its inside only (fine for a sky "
+                        "dome or a room seen from within; otherwise flip its winding in the source)")
+
     columns = []
     for name in options.layout:
         k = ATTRIBUTE_COMPONENTS[name]
@@ -176,6 +181,38 @@ def float32_resolution(pos32: np.ndarray) -> tuple[float, float]:
     diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
     step = float(np.spacing(np.float32(np.max(np.maximum(np.abs(lo), np.abs(hi))))))
     return step, diag
+
+
+def inside_out(pos: np.ndarray, tris: np.ndarray) -> bool:
+    """Whether ``tris`` (M, 3) over ``pos`` (N, 3) is a closed, consistently wound surface (every
+    edge, with vertices at equal positions taken as one, used once in each direction) whose
+    signed volume is negative: its triangles face inward. An open or non-manifold mesh is
+    never called inside out (its volume means nothing)."""
+    tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+    if tris.shape[0] < 4:
+        return False
+    # the signed volume first (one pass): most meshes face outward or are open, and only a
+    # negative volume needs the closedness test
+    p = np.asarray(pos, np.float64)
+    p = p - p[tris[0, 0]]  # volumes about a point of the mesh: no cancellation far out
+    x, y, z = (np.ascontiguousarray(p[:, k]) for k in range(3))
+    i, j, k = tris[:, 0], tris[:, 1], tris[:, 2]
+    volume6 = (x[i] * (y[j] * z[k] - z[j] * y[k]) - y[i] * (x[j] * z[k] - z[j] * x[k])
+               + z[i] * (x[j] * y[k] - y[j] * x[k])).sum()
+    if float(volume6) >= 0.0:
+        return False
+    _, ids = np.unique(p, axis=0, return_inverse=True)
+    t = ids.reshape(-1)[tris]
+    n = int(t.max()) + 1
+    a = t.reshape(-1)
+    b = np.roll(t, -1, axis=1).reshape(-1)
+    if (a == b).any():
+        return False
+    directed = np.sort(a * n + b)
+    if (directed[1:] == directed[:-1]).any():  # an edge used twice the same way
+        return False
+    # every edge with its opposite, once: closed and consistently wound
+    return bool(np.array_equal(directed, np.sort(b * n + a)))
 
 
 def drop_duplicate_triangles(tris: np.ndarray, drop_reversed: bool = False) -> tuple[np.ndarray, int]:

@@ -328,3 +328,34 @@ def test_real_model_duck(corpus):
     n, t = pm.vertices[:, 5:8], pm.vertices[:, 8:12]
     np.testing.assert_allclose(np.linalg.norm(t[:, :3], axis=1), 1.0, atol=1e-6)
     assert np.abs(np.einsum("ij,ij->i", n, t[:, :3])).max() < 1e-4  # the Duck's own (float32) normals
+
+
+def test_inside_out_closed_meshes_are_warned_about():
+    """A closed, consistently wound surface with a negative volume faces inward: the mesh step
+    warns (not for a double-sided material, an open mesh or a non-manifold one)."""
+    import trimesh
+
+    from assetpipe.pipelines.mesh_process import inside_out
+
+    s = trimesh.creation.icosphere(3)
+    pos, tris = np.asarray(s.vertices), np.asarray(s.faces)
+    flipped = tris[:, ::-1]
+    assert not inside_out(pos, tris) and inside_out(pos, flipped)
+    assert inside_out(pos + 1e6, flipped) and not inside_out(pos + 1e6, tris)  # far from the origin
+    assert not inside_out(pos, flipped[:-1])  # open: its volume means nothing
+    mixed = flipped.copy()
+    mixed[0] = tris[0]
+    assert not inside_out(pos, mixed)  # one triangle wound the other way: not consistent
+    # UV seams split vertices at one position: still closed
+    split = np.vstack([pos, pos[:10]])
+    seam = flipped.copy()
+    seam[seam < 10] += len(pos)
+    assert inside_out(split, np.vstack([seam[:50], flipped[50:]]))
+
+    mesh = MeshData(name="ball", positions=pos, indices=flipped.astype(np.uint32))
+    warned = process_mesh(mesh, MeshOptions(optimize=False)).warnings
+    assert any("inside out" in w for w in warned), warned
+    assert not any("inside out" in w for w in process_mesh(mesh, MeshOptions(optimize=False),
+                                                            double_sided=True).warnings)
+    ok = MeshData(name="ball", positions=pos, indices=tris.astype(np.uint32))
+    assert not any("inside out" in w for w in process_mesh(ok, MeshOptions(optimize=False)).warnings)
