@@ -129,7 +129,11 @@ def _material_of(geom: Any, name: str, notes: list[str], images: dict[int, Textu
             except (TypeError, ValueError, IndexError):
                 pass
         image = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
-        alpha_mode = str(getattr(mat, "alphaMode", None) or ("BLEND" if factor[3] < 1.0 else "OPAQUE"))
+        # glTF (trimesh's PBRMaterial): no alphaMode means OPAQUE, whatever the factor's alpha;
+        # an MTL's dissolve below 1 (a SimpleMaterial) is drawn blended, as the build does
+        gltf_material = getattr(mat, "baseColorFactor", None) is not None
+        alpha_mode = str(getattr(mat, "alphaMode", None)
+                         or ("OPAQUE" if gltf_material or factor[3] >= 1.0 else "BLEND"))
         cutoff = float(getattr(mat, "alphaCutoff", None) or 0.5)
         double_sided = bool(getattr(mat, "doubleSided", False))
     skip = skip_roles or set()

@@ -425,3 +425,37 @@ def test_a_one_sided_sheet_facing_away_is_judged_from_its_front(tmp_path: Path) 
         assert lods.status == "pass", (name, lods.messages)
         flipped[name] = any(lv.get("seenFromOppositeSide") for lv in lods.figures["perLevel"])
     assert flipped == {"ceiling": True, "floor": False}  # the first view sees the floor's front
+
+
+def test_a_gltf_factor_alpha_without_alpha_mode_is_opaque_in_the_reference(tmp_path: Path) -> None:
+    """glTF's alphaMode defaults to OPAQUE whatever the base colour factor's alpha: the build
+    draws such a material opaque, and so must the source reference (it blended it, and the
+    source check failed a good model by 0.12 of colour). An MTL's dissolve below 1 stays
+    blended on both sides."""
+    import sys
+
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+    from assetpipe.renderer.source_model import load_source_model
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from gltf_builder import GltfBuilder
+    from validate_assets import sphere
+
+    b = GltfBuilder()
+    pos, nrm, _, _, idx = sphere()
+    for k, alpha in enumerate((0.2, 0.6)):
+        m = b.add_material(name=f"m{k}", pbrMetallicRoughness={"baseColorFactor": [0.9, 0.3 * k, 0.1, alpha]})
+        b.add_node(mesh=b.add_triangles(pos + [2.5 * k, 0, 0], idx, material=m, NORMAL=nrm), name=f"s{k}")
+    src = b.write_glb(tmp_path / "alpha.glb")
+    assert all(m.alpha_mode == "OPAQUE" for m in load_source_model(src).materials)
+    r = CliRunner().invoke(main, ["build", str(src), "-o", str(tmp_path / "out"), "--cache", str(tmp_path / "cache"),
+                                  "-j", "1", "-q"])
+    assert r.exit_code == 0, r.output
+    res = validate_model(tmp_path / "out" / "alpha.json", ValidateOptions(source_root=str(tmp_path)), isolate=False)
+    assert res.check("source").status == "pass", res.check("source").messages
+
+    (tmp_path / "d.obj").write_text("mtllib d.mtl\nusemtl glass\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "d.mtl").write_text("newmtl glass\nKd 0.2 0.4 0.8\nd 0.5\n")
+    assert load_source_model(tmp_path / "d.obj").materials[0].alpha_mode == "BLEND"
