@@ -320,7 +320,8 @@ def _facing_floor(counts: np.ndarray, flipped: np.ndarray, judged: np.ndarray, e
     one ratio would give it only where its facing is not measurably worse. Where the part
     turned away already rises between that point and the next, the crossing, and so the
     floor, can lie above ``even``: such a part keeps more than its even share while the budget
-    allows (:func:`balanced_ratios` caps the floor at ``even`` where the budget does not)."""
+    allows (where the floors do not fit it, :func:`balanced_ratios` gives every mesh its even
+    share for that level)."""
     order = np.argsort(-counts, kind="stable")  # most triangles first
     c, f, n = counts[order], flipped[order], np.maximum(judged[order], 1.0)
     live = c > 0

@@ -201,8 +201,9 @@ def inside_out(pos: np.ndarray, tris: np.ndarray) -> bool:
                + z[i] * (x[j] * y[k] - y[j] * x[k])).sum()
     if float(volume6) >= 0.0:
         return False
-    _, ids = np.unique(p, axis=0, return_inverse=True)
-    t = ids.reshape(-1)[tris]
+    from assetpipe.pipelines.simplify import weld_identical
+
+    t = weld_identical(tris, np.asarray(pos, np.float64)).astype(np.int64)  # one id per position
     n = int(t.max()) + 1
     a = t.reshape(-1)
     b = np.roll(t, -1, axis=1).reshape(-1)

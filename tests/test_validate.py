@@ -327,13 +327,10 @@ def test_wires_thinner_than_a_pixel_are_judged_on_a_finer_sampling(tmp_path: Pat
     a wire's tip and its coarse LOD's dotted wires fall apart from LOD0's, so both checks fail
     it; rendered again at ``supersample`` x the pixels a side (judged in the same pixel units)
     it passes. The control with ``supersample=1`` keeps the false alarm in sight."""
-    import sys
-
     from click.testing import CliRunner
 
     from assetpipe.cli import main
 
-    sys.path.insert(0, str(Path(__file__).parent))
     from validate_assets import write_wires_obj
 
     src = write_wires_obj(tmp_path / "wires.obj")
@@ -432,14 +429,11 @@ def test_a_gltf_factor_alpha_without_alpha_mode_is_opaque_in_the_reference(tmp_p
     draws such a material opaque, and so must the source reference (it blended it, and the
     source check failed a good model by 0.12 of colour). An MTL's dissolve below 1 stays
     blended on both sides."""
-    import sys
-
     from click.testing import CliRunner
 
     from assetpipe.cli import main
     from assetpipe.renderer.source_model import load_source_model
 
-    sys.path.insert(0, str(Path(__file__).parent))
     from gltf_builder import GltfBuilder
     from validate_assets import sphere
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -103,6 +105,18 @@ def budget_for(options, area: float) -> float:
     return options.lod_max_unexplained_px + options.lod_max_unexplained_fraction * area
 
 
+@dataclass(frozen=True)
+class _Lod0Picture:
+    """LOD0 as the lods check pictures it: the camera (every level is drawn with it), the
+    front-facing pixels, whether any pixel is covered, and whether the camera was aimed at the
+    nearest drawn vertex or turned to the opposite side (see ``LodsCheck._lod0_picture``)."""
+    cam: object
+    front: np.ndarray
+    covered: bool
+    reaimed: bool
+    flipped: bool
+
+
 class LodsCheck(Check):
     name = "lods"
     measures = ("the length of LOD k's open edges against LOD0's, for the model and for each mesh; and for each LOD k >= 1, rendered at its switchDistance at the LOD reference pixel scale "
@@ -127,26 +141,25 @@ class LodsCheck(Check):
     needs_render = True
 
     @staticmethod
-    def _lod0_picture(ctx: Context, model, view, size: int, fov: float, distance: float):
-        """(aim point, view direction, LOD0's front-facing pixels, whether LOD0 covers any pixel)
-        of the lods picture at ``distance``: from ``view`` at the model's centre; where that
+    def _lod0_picture(ctx: Context, model, view, size: int, fov: float, distance: float) -> "_Lod0Picture":
+        """LOD0's lods picture at ``distance``: from ``view`` at the model's centre; where that
         picture (capped at lod_max_render_px: the middle of the model) covers nothing, as for a
         ring or a frame, aimed at the drawn LOD0 vertex nearest the centre; where it shows only
         back faces, as for a one-sided sheet (a ceiling, a wall) facing away, from the opposite
         side. A closed model turned inside out shows back faces from both and stays so."""
-        def picture(aim, direction):
+        def picture(aim, direction, reaimed: bool, flipped: bool) -> _Lod0Picture:
             cam = fit_camera(aim, model.radius, direction, size, size, fov_y_deg=fov, distance=distance)
             img = ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=0)
-            return aim, direction, compare.front(img), bool(compare.coverage(img).any())
+            return _Lod0Picture(cam, compare.front(img), bool(compare.coverage(img).any()), reaimed, flipped)
 
-        got = picture(model.center, view)
-        if not got[3]:
+        got = picture(model.center, view, False, False)
+        if not got.covered:
             near = nearest_drawn(model, model.center)
             if near is not None:
-                got = picture(near, view)
-        if got[3] and not got[2].any():
-            other = picture(got[0], tuple(-float(x) for x in view))
-            if other[2].any():
+                got = picture(near, view, True, False)
+        if got.covered and not got.front.any():
+            other = picture(got.cam.target, tuple(-float(x) for x in view), got.reaimed, True)
+            if other.front.any():
                 got = other
         return got
 
@@ -178,17 +191,14 @@ class LodsCheck(Check):
             fine_bad: float | None = None
             reaimed = back_only = flipped_view = False
             for view in views:
-                aim = model.center
-                cam = fit_camera(aim, model.radius, view, size, size, fov_y_deg=fov, distance=distance)
                 with ctx.timer("render"):
                     key = (view, distance, size, fov)
                     if key not in lod0:
                         lod0[key] = self._lod0_picture(ctx, model, view, size, fov, distance)
-                    aim, seen_from, a, seen = lod0[key]
-                    back_only = seen and not a.any()
-                    reaimed = reaimed or aim is not model.center
-                    flipped_view = flipped_view or seen_from is not view
-                    cam = fit_camera(aim, model.radius, seen_from, size, size, fov_y_deg=fov, distance=distance)
+                    pic = lod0[key]
+                    cam, a = pic.cam, pic.front
+                    back_only = back_only or (pic.covered and not a.any())
+                    reaimed, flipped_view = reaimed or pic.reaimed, flipped_view or pic.flipped
                     b = compare.front(ctx.renderer.render(ctx.gpu, cam, mode="facing", lod=k))
                 with ctx.timer("compare"):
                     view_bad = int(compare.unexplained(a, b, 1).sum())
@@ -201,8 +211,7 @@ class LodsCheck(Check):
                     # units: sub-pixels more than f from the other's silhouette, counted as 1/f^2
                     # of a pixel): geometry thinner than a pixel is dotted at one sample a pixel,
                     # and the dots of LOD0 and LOD k fall in different places; a hole stays
-                    fine = fit_camera(aim, model.radius, seen_from, size * f, size * f, fov_y_deg=fov,
-                                      distance=distance)
+                    fine = dataclasses.replace(cam, width=size * f, height=size * f)
                     with ctx.timer("render"):
                         a_f = compare.front(ctx.renderer.render(ctx.gpu, fine, mode="facing", lod=0))
                         b_f = compare.front(ctx.renderer.render(ctx.gpu, fine, mode="facing", lod=k))
