@@ -195,11 +195,11 @@ def frame_origin(side: dict[str, Any] | None) -> np.ndarray:
     draws both in one frame)."""
     side = side if isinstance(side, dict) else {}
     off = side.get("positionOffset")
-    if off is not None:
-        o = np.asarray(off, np.float64).reshape(-1)
-        return o if o.shape == (3,) and np.isfinite(o).all() else np.zeros(3)
     b = side.get("bounds") if isinstance(side.get("bounds"), dict) else {}
-    try:
+    try:  # a malformed sidecar draws from the origin here; the loader names what is wrong
+        if off is not None:
+            o = np.asarray(off, np.float64).reshape(-1)
+            return o if o.shape == (3,) and np.isfinite(o).all() else np.zeros(3)
         c = np.asarray(b.get("center", (0.0, 0.0, 0.0)), np.float64).reshape(3)
         r = float(b.get("radius", 0.0) or 0.0)
     except (TypeError, ValueError):
@@ -506,7 +506,10 @@ def load_built_model(model_json: Path, load_textures: bool = True,
     center = np.asarray(b.get("center", (bmin + bmax) / 2), np.float64)
     radius = float(b.get("radius", np.linalg.norm(bmax - bmin) / 2))
     if side.get("positionOffset") is not None:  # a recentred model (docs/FORMAT.md, "Precision")
-        stored = np.asarray(side["positionOffset"], np.float64).reshape(-1)
+        try:
+            stored = np.asarray(side["positionOffset"], np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            stored = np.zeros(0)
         if stored.shape != (3,) or not np.isfinite(stored).all():
             raise AssetError(model_json, "sidecar positionOffset is not three finite numbers")
     # drawn relative to frame_origin: a recentred model as stored (positions, bounds and centres

@@ -110,5 +110,17 @@ def test_frame_origin():
     assert not frame_origin({"bounds": {"center": [edge, 0, 0], "radius": 2.0}}).any()
     assert frame_origin({"bounds": {"center": [edge * 1.01, 0, 0], "radius": 2.0}}).any()
     for bad in (None, {}, {"bounds": {"center": "x"}}, {"bounds": {"center": [float("nan"), 0, 0], "radius": 1}},
-                {"positionOffset": [1, 2]}):
+                {"positionOffset": [1, 2]}, {"positionOffset": ["a", "b", "c"]}, {"positionOffset": {"x": 1}}):
         assert not frame_origin(bad).any()
+
+
+@pytest.mark.parametrize("offset", [[1, 2], ["a", "b", "c"], [1, float("inf"), 0], "far"])
+def test_a_bad_position_offset_is_one_clear_error(tmp_path, offset):
+    cube = tmp_path / "cube"
+    shutil.copytree(BUILT / "cube", cube)
+    side_path = cube / "cube.asset.json"
+    side = json.loads(side_path.read_text())
+    side["positionOffset"] = offset
+    side_path.write_text(json.dumps(side))
+    with pytest.raises(AssetError, match="positionOffset is not three finite numbers"):
+        load_built_model(cube / "cube.json")
