@@ -28,7 +28,7 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                    lod_max_error: float | None = None, lod_screen_sizes: str | None = None,
                    texture_compression: str | None = None, texture_zstd: bool = False,
                    oversize_textures: str | None = None, budgets: dict | None = None,
-                   lod_balance: bool | None = None):
+                   lod_balance: bool | None = None, lod_move: bool | None = None):
     """BuildOptions from the command line; unspecified values keep the dataclass defaults.
     ``max_texture_size`` 0: no cap; ``budgets``: InputBudgets fields to change (None values kept)."""
     import dataclasses
@@ -53,6 +53,8 @@ def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier
                 changes["max_error"] = lod_max_error if lod_max_error > 0 else None
             if lod_balance is not None:
                 changes["balance_meshes"] = bool(lod_balance)
+            if lod_move is not None:
+                changes["move_vertices"] = bool(lod_move)
             if lod_screen_sizes:
                 changes["target_screen_sizes"] = (0.0, *(float(x) for x in lod_screen_sizes.split(",")))
             lod = dataclasses.replace(d.lod, **changes)
@@ -122,6 +124,11 @@ def eval_ratio(text: str) -> float:
               help="Share each LOD level's triangle budget among a model's meshes by error, so a small "
                    "detailed part is not halved like a large smooth one (--no-lod-balance: every mesh at "
                    f"every ratio; docs/BUILD.md) [default: {'on' if _D.lod.balance_meshes else 'off'}].")
+@click.option("--lod-move/--no-lod-move", default=None,
+              help="Let LOD levels move the vertices they keep (meshoptimizer's simplifyWithUpdate, gltfpack's "
+                   "-sv) where that measures closer to LOD0; such a level gets its own vertex rows after LOD0's "
+                   "(--no-lod-move: every level indexes LOD0's vertices, a prefix each; docs/FORMAT.md) "
+                   f"[default: {'on' if _D.lod.move_vertices else 'off'}].")
 @click.option("--lod-max-error", type=float, default=None,
               help=f"LOD error budget, a fraction of the mesh's diagonal: a level whose measured error exceeds it is "
                    f"not written; 0 for no budget [default: {_D.lod.max_error:g}].")
@@ -165,7 +172,7 @@ def eval_ratio(text: str) -> float:
 def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,
           simplifier, lock_border, lod_max_error, lod_screen_sizes, max_texture_size, recenter, max_output_mb,
           max_image_pixels, texture_compression, texture_zstd, oversize_textures, max_model_mb, max_placements,
-          max_triangles, max_coordinate, lod_balance) -> None:
+          max_triangles, max_coordinate, lod_balance, lod_move) -> None:
     """Build INPUTS into OUT: .gltf, .glb and .obj files, folders (searched recursively), and scene
     files (*.json, docs/SCENES.md): with scenes, only the models they reference are built, each with
     what its objects can use, and OUT/<scene>.scene.json lists the instances."""
@@ -183,11 +190,12 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  max_output_mb=max_output_mb, max_image_pixels=max_image_pixels,
                  texture_compression=texture_compression, texture_zstd=texture_zstd,
                  oversize_textures=oversize_textures, max_model_mb=max_model_mb, max_placements=max_placements,
-                 max_triangles=max_triangles, max_coordinate=max_coordinate, lod_balance=lod_balance)
+                 max_triangles=max_triangles, max_coordinate=max_coordinate, lod_balance=lod_balance,
+                 lod_move=lod_move)
     values, origin = _project_defaults(inputs, **given)
     (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, lod_max_error, lod_screen_sizes,
      max_texture_size, recenter, max_output_mb, max_image_pixels, texture_compression, texture_zstd,
-     oversize_textures, max_model_mb, max_placements, max_triangles, max_coordinate, lod_balance) = values
+     oversize_textures, max_model_mb, max_placements, max_triangles, max_coordinate, lod_balance, lod_move) = values
     if jobs is None:
         jobs = usable_cpus()  # as ninja: the CPUs this process may run on
     if explain:
@@ -206,7 +214,8 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                  "max_coordinate": max_coordinate or _D.budgets.max_coordinate,
                  "max_output_mb": max_output_mb, "max_image_pixels": max_image_pixels,
                  "texture_compression": texture_compression or _D.texture.compression, "texture_zstd": texture_zstd,
-                 "lod_balance": _D.lod.balance_meshes if lod_balance is None else lod_balance}
+                 "lod_balance": _D.lod.balance_meshes if lod_balance is None else lod_balance,
+                 "lod_move": _D.lod.move_vertices if lod_move is None else lod_move}
         for name, where in origin.items():
             click.echo(f"option {name.replace('_', '-')}: {shown[name]} ({where})")
 
@@ -214,7 +223,7 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
                    max_placements=max_placements, max_triangles=max_triangles, max_coordinate=max_coordinate)
     options = _build_options(layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size, recenter,
                              lod_max_error, lod_screen_sizes, texture_compression, texture_zstd,
-                             oversize_textures, budgets, lod_balance)
+                             oversize_textures, budgets, lod_balance, lod_move)
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))

@@ -29,6 +29,7 @@ class OutputLod:
     error: dict = field(default_factory=dict)
     switch_distance: float = 0.0
     chain_level: int | None = None  # its level in the full chain, when levels were skipped
+    vertex_start: int = 0  # the first of the level's own vertex rows (a moved level), else 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,6 +126,8 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
                      "error": err, "switchDistance": _num(lod.switch_distance)}
             if lod.chain_level is not None and lod.chain_level != li:
                 entry["chainLevel"] = lod.chain_level
+            if lod.vertex_start:
+                entry["vertexStart"] = int(lod.vertex_start)
             lods.append(entry)
         side_meshes.append({"id": m.id, "name": m.name, "materialId": m.material_id,
                             "vertexCount": int(m.vertices.shape[0]),

@@ -10,6 +10,7 @@ table, found from the inputs' folders upward. Its keys are the build command's o
     simplifier = "meshopt-attr"
     lock_border = false
     lod_balance = true                       # false: --no-lod-balance
+    lod_move = true                          # false: --no-lod-move
     max_texture_size = 2048                  # 0: no cap (default 8192)
     oversize_textures = "downscale"          # or "refuse"
     max_triangles = 50_000_000               # input budgets: max_model_mb, max_placements, max_coordinate too
@@ -38,6 +39,7 @@ KEYS: dict[str, tuple[tuple[type, ...], str]] = {
     "simplifier": ((str,), "the LOD simplifier's name"),
     "lock_border": ((bool,), "true or false"),
     "lod_balance": ((bool,), "true or false (false: every mesh at every LOD ratio)"),
+    "lod_move": ((bool,), "true or false (false: every LOD level indexes LOD0's vertices)"),
     "max_texture_size": ((int,), "a whole number of pixels (0: no cap)"),
     "lod_max_error": ((int, float), "a fraction of the mesh's diagonal (0: no budget)"),
     "lod_screen_sizes": ((list, str), "on-screen sizes in pixels: a list of numbers or a string like '400,100,25'"),
@@ -79,7 +81,7 @@ class ProjectConfig:
         if "lod_screen_sizes" in v:
             r = v["lod_screen_sizes"]
             out["lod_screen_sizes"] = ",".join(f"{x:g}" for x in r) if isinstance(r, list) else r
-        for key in ("simplifier", "lock_border", "lod_balance", "max_texture_size", "jobs", "lod_max_error", "recenter",
+        for key in ("simplifier", "lock_border", "lod_balance", "lod_move", "max_texture_size", "jobs", "lod_max_error", "recenter",
                     "max_output_mb", "max_image_pixels", "texture_compression", "texture_zstd",
                     "oversize_textures", "max_model_mb", "max_placements", "max_triangles", "max_coordinate"):
             if key in v:

@@ -245,6 +245,8 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
                 out_arrays[f"{j}.lod{k}"] = lv.indices
                 levels_meta.append({"error": lv.error_json() if k else None, "sloppy": lv.sloppy,
                                     "switchDistance": lv.switch_distance, "vertexCount": count})
+                if lm.vertex_starts and lm.vertex_starts[k]:  # its own (moved) vertex rows
+                    levels_meta[-1]["vertexStart"] = lm.vertex_starts[k]
             first = ms[0]
             entry = {**first, "degenerate": sum(x["degenerate"] for x in ms),
                      "welded": sum(x["welded"] for x in ms),
@@ -378,11 +380,13 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
         kept = keep[i] if keep is not None else list(range(len(m["lods"])))
         lods = tuple(OutputLod(indices=arrays[f"{i}.lod{k}"], vertex_count=m["lods"][k]["vertexCount"],
                                error=m["lods"][k]["error"] or {}, switch_distance=m["lods"][k]["switchDistance"],
-                               chain_level=k)
+                               chain_level=k, vertex_start=int(m["lods"][k].get("vertexStart", 0)))
                      for k in kept)
         vertices = arrays[f"{i}.vertices"]
         if kept and kept[0] > 0 and not m["lods"][kept[0]].get("handmade"):
-            vertices = vertices[:lods[0].vertex_count]  # the prefix the kept levels use
+            # the rows the kept levels use: the first one's prefix, and any own rows of a moved
+            # level after it (kept as they are: their indices point there)
+            vertices = vertices[:max(lod.vertex_count for lod in lods)]
         if lods[0].indices.shape[0] == 0:
             warnings.append(f"{m['name']}: no triangles left after dropping degenerate ones; mesh skipped")
             continue

@@ -8,7 +8,7 @@ IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate 
            # 4: meta has the bounding-box centre (--recenter)
 MESH = 5  # 5: inside-out closed meshes warned about; 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
           # 4: generated tangents are MikkTSpace (pipelines/tangents.py), w in glTF's convention
-LOD = 18  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
+LOD = 19  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
         # 7: the bound's kernels compiled (numba): same formulas, float64 rounding may differ in the last digits
@@ -24,6 +24,7 @@ LOD = 18  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         # 16: no mesh's share below 3/4 of its even share (lod_model.SHARE_KEEP)
         # 17: balance_meshes on by default, with a facing floor (no thin part folded flat below its even share)
         # 18: a balanced level whose curves stall above its budget gives every mesh its even share
+        # 19: a candidate with moved vertices (meshoptimizer 1.3 simplifyWithUpdate, LodOptions.move_vertices): such levels get their own vertex rows
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
 ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
@@ -64,8 +65,20 @@ def library_versions() -> dict:
     disk beside the cache, keyed by the modification times of the site-packages folders
     (installing, upgrading or removing a package changes them)."""
     global _cached
-    if _cached is not None:
-        return dict(_cached)
+    if _cached is None:
+        _cached = {**_python_versions(), "meshoptimizer-wasm": _wasm_version()}
+    return dict(_cached)
+
+
+def _wasm_version() -> str | None:
+    """meshoptimizer's WASM simplifier (npm, run by wasmtime: pipelines/meshopt_wasm.py), or
+    None when it is not installed: levels with moved vertices exist only with it."""
+    from assetpipe.pipelines import meshopt_wasm
+
+    return meshopt_wasm.version()
+
+
+def _python_versions() -> dict:
     import json
     import os
     from pathlib import Path
@@ -82,8 +95,7 @@ def library_versions() -> dict:
     try:
         data = json.loads(memo.read_bytes())
         if data.get("stamp") == stamp and set(data.get("versions", {})) == set(_DISTS):
-            _cached = data["versions"]
-            return dict(_cached)
+            return dict(data["versions"])
     except (OSError, ValueError, AttributeError):
         pass
     from importlib.metadata import PackageNotFoundError, version
@@ -94,7 +106,6 @@ def library_versions() -> dict:
             out[dist] = version(dist)
         except PackageNotFoundError:
             out[dist] = None
-    _cached = out
     try:
         memo.parent.mkdir(parents=True, exist_ok=True)
         tmp = memo.with_name(f".{memo.name}.{os.getpid()}")

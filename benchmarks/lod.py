@@ -81,7 +81,8 @@ SIMPLIFIERS = ("meshopt", "meshopt-attr", "meshopt+lock_border", "sloppy", "fast
 #: mesh at every ratio (LodOptions.balance_meshes off; on by default since LOD step 17)
 VARIANTS = {"ours": {}, "ours-chained": {"chain": "chained"}, "ours-direct": {"chain": "direct"},
             "ours-per-mesh": {"merge_meshes": False, "chain": "chained", "dedupe_triangles": False},
-            "ours-one-ratio": {"balance_meshes": False}}
+            "ours-one-ratio": {"balance_meshes": False},
+            "ours-in-place": {"move_vertices": False}}
 MIN_TRIANGLES = 300  # corpus files below this are too small to say anything
 
 
@@ -401,7 +402,7 @@ def main() -> int:
                     # are timed without it
                     opts = LodOptions(ratios=ratios, min_triangles=1, max_error=None,
                                       error_samples=min(args.samples, DEFAULT_LOD_OPTIONS.error_samples),
-                                      measure=variant in ("ours", "ours-one-ratio") or args.measure_variants, **extra)
+                                      measure=variant in ("ours", "ours-one-ratio", "ours-in-place") or args.measure_variants, **extra)
                     t = time.perf_counter()
                     lm = build_model_lods(build, opts)
                     dt = time.perf_counter() - t

@@ -38,6 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
+from assetpipe.pipelines import meshopt_wasm
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
 from assetpipe.pipelines.surface_error import (
@@ -81,6 +82,10 @@ class LodLevel:
     from_level: int = 0  # the level this one was simplified from (the level above, or 0)
     hausdorff_lower_rel: float = 0.0  # the largest distance the bound evaluated: the truth lies between
     converged: bool = True  # the bound reached its tolerance (else it holds but may be loose)
+    #: None: the level indexes level 0's vertices where they are; else (N, 3) float64 model
+    #: units, the positions of the vertices it uses (moved by the simplifier; the rows it does
+    #: not use are level 0's): it gets its own vertex rows (docs/FORMAT.md)
+    positions: np.ndarray | None = field(default=None, repr=False)
 
     def error_json(self) -> dict[str, float]:
         """The sidecar's ``error`` object (docs/FORMAT.md)."""
@@ -162,43 +167,73 @@ def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOpti
     return np.concatenate(cols, axis=1), np.asarray(weights, np.float32)
 
 
-_Candidate = tuple  # (indices (K, 3) uint32, simplifier error, sloppy, from level)
+#: (indices (K, 3) uint32, simplifier error, sloppy, from level, moved): ``moved`` is None
+#: when the level indexes level 0's vertices where they are, else (N, 3) float32 positions in
+#: the chain's local frame (the vertices it uses moved by ``meshopt_simplifyWithUpdate``, or
+#: inherited from a moved level it was simplified from)
+_Candidate = tuple
 
 
 def _candidates(pos32: np.ndarray, src: np.ndarray, src_level: int, src_err: float, target: int,
                 target_error: float, attrs: np.ndarray | None, weights: np.ndarray | None,
-                opts: LodOptions) -> list[_Candidate]:
+                opts: LodOptions, src_moved: np.ndarray | None = None) -> list[_Candidate]:
     """Simplifications of ``src`` towards ``target`` triangles.
 
     The regular simplifier first (with attributes), then, with ``geometry_candidate``, the
-    same on positions alone. When it stops above ``sloppy_slack`` x the target
-    (topology allows no more collapses), meshoptimizer's component pruning (keeps seams
-    closed) and, with ``sloppy_fallback``, the sloppy simplifier are tried too. The caller
-    picks by measured error. Simplifier errors are summed along the chain (an estimate)."""
+    same on positions alone, and with ``move_vertices`` meshoptimizer 1.3's
+    ``simplifyWithUpdate`` on positions alone (its kept vertices moved to where they minimise
+    the quadric error, :mod:`pipelines.meshopt_wasm`). When the regular one stops above
+    ``sloppy_slack`` x the target (topology allows no more collapses), meshoptimizer's
+    component pruning (keeps seams closed) and, with ``sloppy_fallback``, the sloppy
+    simplifier are tried too. The caller picks by measured error. Simplifier errors are
+    summed along the chain (an estimate). ``src_moved``: the positions ``src`` has when it is
+    a moved level (None: ``pos32``); its candidates keep them."""
+    pos = pos32 if src_moved is None else src_moved
     if opts.simplifier == "fast-simplification":
-        out, err = simp.simplify_fast(pos32, src, target, preserve_border=opts.lock_border)
-        return [(out, src_err + err, False, src_level)]
-    out, err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
+        out, err = simp.simplify_fast(pos, src, target, preserve_border=opts.lock_border)
+        return [(out, src_err + err, False, src_level, src_moved)]
+    out, err = simp.simplify(pos, src, target, attributes=attrs, attribute_weights=weights,
                              lock_border=opts.lock_border, target_error=target_error)
-    cands = [(out, src_err + err, False, src_level)]
+    cands = [(out, src_err + err, False, src_level, src_moved)]
     if attrs is not None and opts.geometry_candidate:
         # the same simplification on positions alone (UV seams still stay closed): it wins
         # only where its measured error is lower (see LodOptions.geometry_candidate)
-        g_out, g_err = simp.simplify(pos32, src, target, lock_border=opts.lock_border,
+        g_out, g_err = simp.simplify(pos, src, target, lock_border=opts.lock_border,
                                      target_error=target_error)
-        cands.append((g_out, src_err + g_err, False, src_level))
+        cands.append((g_out, src_err + g_err, False, src_level, src_moved))
+    if opts.move_vertices and meshopt_wasm.available():
+        u_out, u_pos, u_err = _simplify_moving(pos, src, target, target_error, opts.lock_border)
+        if u_out.shape[0] > 0:
+            cands.append((u_out, src_err + u_err, False, src_level, u_pos))
     if target_error < simp.NO_ERROR_LIMIT or out.shape[0] <= opts.sloppy_slack * target \
             or opts.lock_border:
         return cands
-    p_out, p_err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
+    p_out, p_err = simp.simplify(pos, src, target, attributes=attrs, attribute_weights=weights,
                                  target_error=target_error, prune=True)
     if p_out.shape[0] > 0:
-        cands.append((p_out, src_err + p_err, False, src_level))
+        cands.append((p_out, src_err + p_err, False, src_level, src_moved))
     if opts.sloppy_fallback:
-        s_out, s_err = simp.simplify_sloppy(pos32, src, target, cleanup=True)
+        s_out, s_err = simp.simplify_sloppy(pos, src, target, cleanup=True)
         if s_out.shape[0] > 0:
-            cands.append((s_out, src_err + s_err, True, src_level))
+            cands.append((s_out, src_err + s_err, True, src_level, src_moved))
     return cands
+
+
+def _simplify_moving(pos32: np.ndarray, src: np.ndarray, target: int, target_error: float,
+                     lock_border: bool) -> tuple[np.ndarray, np.ndarray, float]:
+    """``meshopt_simplifyWithUpdate`` with :func:`pipelines.simplify.simplify`'s conventions
+    (sparse, absolute error limit from the relative one; error returned as a fraction of the
+    diagonal of ``pos32``). Returns (indices (K, 3) uint32, positions (N, 3) float32, error)."""
+    extent, diag = simp._extent_and_diagonal(pos32)
+    options = meshopt_wasm.SPARSE | meshopt_wasm.ERROR_ABSOLUTE
+    if lock_border:
+        options |= meshopt_wasm.LOCK_BORDER
+    limit = min(float(target_error) * extent if extent > 0 else float(target_error), 3.0e38)
+    out, moved, err = meshopt_wasm.simplify_with_update(pos32, src, target, target_error=limit,
+                                                        options=options)
+    if not np.isfinite(moved[np.unique(out.reshape(-1))]).all():
+        return np.zeros((0, 3), np.uint32), moved, math.inf  # never a non-finite vertex
+    return out, moved, err / diag if diag > 0 else err
 
 
 #: locked re-simplifications per step at most (each kept only while it lowers the estimate).
@@ -267,14 +302,14 @@ def _refine_with_locks(samples: np.ndarray, pos32: np.ndarray, base: np.ndarray,
     lock[src_ids[np.atleast_1d(nearest)]] = 1
     out, err = simp.simplify(pos32, src, target, attributes=attrs, attribute_weights=weights,
                              lock_border=opts.lock_border, vertex_lock=lock)
-    return (out, src_err + err, False, best[3])
+    return (out, src_err + err, False, best[3], None)
 
 
 def _unique(cands: list[_Candidate]) -> list[_Candidate]:
     """Drop candidates whose index buffer equals an earlier one's (same result, one measure)."""
     seen, out = set(), []
     for c in cands:
-        key = (c[0].shape, c[0].tobytes())
+        key = (c[0].shape, c[0].tobytes(), None if c[4] is None else c[4].tobytes())
         if key not in seen:
             seen.add(key)
             out.append(c)
@@ -298,8 +333,9 @@ class _Estimator:
     then shares), whose BVH (built on first use by either) is used instead."""
 
     def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int,
-                 side=None) -> None:
+                 side=None, frame: tuple[np.ndarray, float] = (np.zeros(3), 1.0)) -> None:
         self.local, self.idx, self.n, self.seed = local, idx, n, seed
+        self.frame = frame  # (centre, scale): the chain's local frame -> this one
         used = np.zeros(local.shape[0], bool)
         used[idx.reshape(-1)] = True
         self.used = used
@@ -310,6 +346,18 @@ class _Estimator:
         # the BVH each candidate's forward half built, by the candidate's index array (kept
         # alive here): the recorded bound of the chosen level reuses it (keep() drops the rest)
         self._built: dict[int, tuple[np.ndarray, object]] = {}
+        self._moved: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def positions(self, moved: np.ndarray | None) -> np.ndarray:
+        """A candidate's vertex positions in this frame: level 0's, or its moved ones (float64;
+        the same array for the same ``moved``, so BVHs built over it are reused)."""
+        if moved is None:
+            return self.local
+        got = self._moved.get(id(moved))
+        if got is None or got[0] is not moved:
+            got = (moved, (np.asarray(moved, np.float64) - self.frame[0]) / self.frame[1])
+            self._moved[id(moved)] = got
+        return got[1]
 
     def engine_for(self, tri: np.ndarray):
         """The BVH the forward half built over ``tri`` (this very array), or None."""
@@ -320,6 +368,7 @@ class _Estimator:
         """Forget the BVHs of every candidate but ``tris`` (the chosen levels)."""
         ids = {id(t) for t in tris}
         self._built = {k: v for k, v in self._built.items() if k in ids}
+        self._moved = {}
 
     def _subset(self, ids: np.ndarray) -> np.ndarray:
         if ids.shape[0] <= self.n:
@@ -337,15 +386,22 @@ class _Estimator:
 
         if self._engine is None:
             self._engine = self._side.engine if self._side is not None else _Engine(self.local, self.idx)
-        back, sizes, used_of = [], [], []
+        back, sizes, used_of, pos_of, moved_of = [], [], [], [], []
         for c in cands:
             tri = c[0]
+            pos = self.positions(c[4])
+            pos_of.append(pos)
             used = np.zeros(self.local.shape[0], bool)
             used[tri.reshape(-1)] = True
             used_of.append(used)
-            # vertices shared with level 0 are on it (distance 0): only the others
-            p = np.concatenate([sample_surface(self.local, tri, self.n, self.seed + 1),
-                                self.local[self._subset(np.flatnonzero(used & ~self.used))]])
+            # vertices shared with level 0 (and not moved) are on it (distance 0): only the others
+            off = used & ~self.used
+            moved_of.append(None)
+            if c[4] is not None:
+                moved_of[-1] = np.any(pos != self.local, axis=1)
+                off |= used & moved_of[-1]
+            p = np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
+                                pos[self._subset(np.flatnonzero(off))]])
             back.append(p)
             sizes.append(p.shape[0])
         d = self._engine.query(np.concatenate(back))[0]
@@ -355,12 +411,13 @@ class _Estimator:
             start += k
 
         def forward(i: int) -> float:
-            removed = self._subset(np.flatnonzero(self.used & ~used_of[i]))
+            gone = ~used_of[i] if moved_of[i] is None else ~used_of[i] | moved_of[i]
+            removed = self._subset(np.flatnonzero(self.used & gone))
             pts = np.concatenate([self.samples, self.local[removed]])
             tri = cands[i][0]
             eng = self.engine_for(tri)
             if eng is None:
-                eng = _Engine(self.local, tri.astype(np.int64))
+                eng = _Engine(pos_of[i], tri.astype(np.int64))
                 self._built[id(tri)] = (tri, eng)
             return float(eng.query(pts)[0].max())
 
@@ -430,7 +487,7 @@ def build_lod_chain(
     idx = np.ascontiguousarray(np.asarray(indices).reshape(-1, 3), dtype=np.uint32)
     pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     n, m0 = pos.shape[0], idx.shape[0]
-    local, _, diag = _normalised(pos, idx)
+    local, centre, diag = _normalised(pos, idx)
     pos32 = np.ascontiguousarray(local, dtype=np.float32)
     attrs = weights = None
     if options.simplifier == "meshopt-attr":
@@ -450,18 +507,18 @@ def build_lod_chain(
         ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0),
                                 seed=options.error_seed)
         est = _Estimator(ref.positions, ref.indices, min(options.samples_for(m0), ESTIMATE_SAMPLES),
-                         options.error_seed + 101, side=ref.side)
+                         options.error_seed + 101, side=ref.side, frame=(ref.centre, ref.scale))
     error_targets = options.error_targets()
     chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
     direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"
     budget = options.max_error if options.max_error is not None else math.inf
     lock_pts = None  # level-0 samples placing the locks of _refine_with_locks (made on first use)
-    # (indices, simplifier error, sloppy, from level), measured error
-    chosen: list[tuple[_Candidate, SurfaceError | None]] = [((welded, 0.0, False, 0), None)]
+    # (indices, simplifier error, sloppy, from level, moved), measured error
+    chosen: list[tuple[_Candidate, SurfaceError | None]] = [((welded, 0.0, False, 0, None), None)]
     steps = error_targets if error_targets is not None else options.ratios
     scale32 = simp._scale_ratio(pos32, welded) if welded.size else 1.0
     for step in steps[1:]:
-        (prev, prev_err, _, _), _ = chosen[-1]
+        (prev, prev_err, _, _, prev_moved), _ = chosen[-1]
         prev_n = prev.shape[0]
         k_prev = len(chosen) - 1
         max_allowed = math.floor((1.0 - options.min_saving) * prev_n)
@@ -479,7 +536,7 @@ def build_lod_chain(
             cands = []
             if chained:
                 cands += _candidates(pos32, prev, k_prev, prev_err, target, simp.NO_ERROR_LIMIT,
-                                     attrs, weights, options)
+                                     attrs, weights, options, prev_moved)
             if direct and (k_prev > 0 or not chained):
                 cands += _candidates(pos32, welded, 0, 0.0, target, simp.NO_ERROR_LIMIT,
                                      attrs, weights, options)
@@ -496,7 +553,8 @@ def build_lod_chain(
             else:
                 i = min(range(len(cands)), key=lambda i: (cands[i][0].shape[0], i))
             best = (cands[i], errs[i])
-            if within and est is not None and options.lock_fraction > 0 and not cands[i][2]:
+            if within and est is not None and options.lock_fraction > 0 and not cands[i][2] \
+                    and cands[i][4] is None and prev_moved is None:
                 if lock_pts is None:
                     lock_pts = sample_surface(local, idx.astype(np.int64), est.n,
                                               options.error_seed + 202)
@@ -514,7 +572,9 @@ def build_lod_chain(
     if ref is not None and len(chosen) > 1:
         measured[1:] = measure_levels(ref, [c[0][0] for c in chosen[1:]],
                                       lower=[c[1] for c in chosen[1:]],
-                                      engines=[est.engine_for(c[0][0]) for c in chosen[1:]])
+                                      engines=[est.engine_for(c[0][0]) for c in chosen[1:]],
+                                      positions=[None if c[0][4] is None else est.positions(c[0][4])
+                                                 for c in chosen[1:]])
         for k in range(1, len(chosen)):
             target = error_targets[k] if error_targets is not None else math.inf
             if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):
@@ -527,9 +587,14 @@ def build_lod_chain(
     scale = diag if diag > 0 and math.isfinite(diag) else 0.0
     running = 0.0
     nan = math.nan
-    for k, ((out, err, sloppy, src), e) in enumerate(chosen[1:], start=1):
+    unit = diag if diag > 0 and math.isfinite(diag) else 1.0
+    for k, ((out, err, sloppy, src, moved), e) in enumerate(chosen[1:], start=1):
+        # a moved level's positions back in model units (float64; rows it does not use are
+        # level 0's)
+        own = None if moved is None else np.asarray(moved, np.float64) * unit + centre
         if e is None:
-            levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy, src))
+            levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy, src,
+                                   positions=own))
             continue
         h_model = e.hausdorff_rel * scale
         running = max(running, h_model)
@@ -537,7 +602,7 @@ def build_lod_chain(
             level=k, indices=out, triangles=int(out.shape[0]), simplifier_error=err,
             hausdorff=h_model, rms=e.rms_rel * scale, hausdorff_rel=e.hausdorff_rel,
             rms_rel=e.rms_rel, switch_distance=running * ppu, sloppy=sloppy, from_level=src,
-            hausdorff_lower_rel=e.hausdorff_lower_rel, converged=e.converged))
+            hausdorff_lower_rel=e.hausdorff_lower_rel, converged=e.converged, positions=own))
     return LodChain(levels=tuple(levels), diagonal=diag)
 
 
@@ -554,7 +619,7 @@ def _error_targeted(pos32, welded, chosen, target_rel: float, max_allowed: int, 
     limit starts at the target and is halved (up to 6 times) while no candidate is. Without
     measuring the simplifier's own estimate decides. The level's bound is checked against
     the target afterwards (the chain ends at a level over it)."""
-    (prev, prev_err, _, _), _ = chosen[-1]
+    (prev, prev_err, _, _, prev_moved), _ = chosen[-1]
     k_prev = len(chosen) - 1
     # meshopt's error is relative to the extent (largest side), ours to the diagonal
     limit = target_rel / scale32
@@ -562,7 +627,7 @@ def _error_targeted(pos32, welded, chosen, target_rel: float, max_allowed: int, 
         cands = []
         if chained:
             cands += _candidates(pos32, prev, k_prev, prev_err, options.min_triangles, limit,
-                                 attrs, weights, options)
+                                 attrs, weights, options, prev_moved)
         if direct and (k_prev > 0 or not chained):
             cands += _candidates(pos32, welded, 0, 0.0, options.min_triangles, limit,
                                  attrs, weights, options)

@@ -71,7 +71,9 @@ class LodMesh:
 
     vertices: (N, C) float32, the parts' vertices concatenated then reordered (prefix layout).
     levels: the chain's levels (``LodLevel``; ``indices`` remapped into ``vertices``).
-    vertex_counts: per level, the vertex prefix it uses.
+    vertex_counts: per level, the vertex prefix it uses (for a level with its own vertex rows,
+      the end of them).
+    vertex_starts: per level, 0, or the first of its own vertex rows (a moved level).
     duplicates: triangles dropped as duplicates before simplifying.
     copy_of: the output mesh whose chain this one reuses (an affine copy), or None.
     """
@@ -81,6 +83,7 @@ class LodMesh:
     levels: tuple[LodLevel, ...]
     vertex_counts: tuple[int, ...]
     duplicates: int = 0
+    vertex_starts: tuple[int, ...] = ()
     copy_of: int | None = None
 
 
@@ -513,14 +516,54 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
             used = pos[np.unique(idx.reshape(-1))] if idx.size else pos[:0]
             diag = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))) if used.size else 0.0
             levels = _scaled_levels(source_levels[j], sigma, resid, diag, options, mirrored)
-        order = reorder_for_lod_prefix([lv.indices for lv in levels], verts.shape[0])
-        out.append(LodMesh(
-            parts=tuple(g), vertices=verts[order.order],
-            levels=tuple(dataclasses.replace(lv, indices=new) for lv, new in zip(levels, order.indices)),
-            vertex_counts=order.vertex_counts, duplicates=dups,
-            copy_of=None if copy is None else copy[0]))
+            # a moved level's vertices through the same map: copy(x) = lin x + t, so
+            # copy(moved) = copy(original) + lin (moved - original), within the fit's residual
+            src_pos = merged[j][2]
+            levels = tuple(lv if lv.positions is None else dataclasses.replace(
+                lv, positions=pos + (lv.positions - src_pos) @ lin.T) for lv in levels)
+        vertices, new_levels, counts, starts = vertex_layout(verts, levels)
+        out.append(LodMesh(parts=tuple(g), vertices=vertices, levels=new_levels, vertex_counts=counts,
+                           duplicates=dups, copy_of=None if copy is None else copy[0],
+                           vertex_starts=starts))
     return out
 
 
+def vertex_layout(verts: np.ndarray, levels: Sequence[LodLevel]
+                  ) -> tuple[np.ndarray, tuple[LodLevel, ...], tuple[int, ...], tuple[int, ...]]:
+    """The mesh's vertex rows and its levels' indices into them (docs/FORMAT.md).
+
+    verts: (N, C) float32 rows of level 0 (position in the first three columns). Levels over
+    level 0's vertices (``positions`` None) share them, ordered by
+    :func:`pipelines.lod.reorder_for_lod_prefix` so that each uses a prefix; each level with
+    its own (moved) positions gets its own rows after them, in order of first use: a copy of
+    the row of the vertex it moved, with the moved position. Returns (rows (N + extra, C),
+    levels with remapped ``indices`` and ``positions`` dropped, per level the end of the rows
+    it uses (its prefix, or the end of its own rows), per level the start of its own rows or
+    0)."""
+    n = verts.shape[0]
+    empty = np.zeros((0, 3), np.uint32)
+    order = reorder_for_lod_prefix([lv.indices if lv.positions is None else empty for lv in levels], n)
+    rows, idx, counts = [verts[order.order]], list(order.indices), list(order.vertex_counts)
+    starts = [0] * len(levels)
+    end = n
+    for k, lv in enumerate(levels):
+        if lv.positions is None:
+            continue
+        flat = np.asarray(lv.indices, np.int64).reshape(-1)
+        ids, first = np.unique(flat, return_index=True)
+        ids = ids[np.argsort(first, kind="stable")]  # order of first use
+        local = np.zeros(n, np.int64)
+        local[ids] = np.arange(ids.size)
+        own = np.array(verts[ids], dtype=verts.dtype, copy=True)
+        own[:, :3] = lv.positions[ids]
+        rows.append(own)
+        idx[k] = (local[np.asarray(lv.indices, np.int64)] + end).astype(np.uint32).reshape(-1, 3)
+        starts[k] = end
+        end += ids.size
+        counts[k] = end
+    new_levels = tuple(dataclasses.replace(lv, indices=i, positions=None) for lv, i in zip(levels, idx))
+    return (rows[0] if len(rows) == 1 else np.concatenate(rows)), new_levels, tuple(counts), tuple(starts)
+
+
 __all__ = ["LodPart", "LodMesh", "balanced_ratios", "build_model_lods", "dedupe_triangles",
-           "find_affine_copies", "merge_groups", "LodChain"]
+           "find_affine_copies", "merge_groups", "vertex_layout", "LodChain"]

@@ -117,6 +117,14 @@ class LodOptions:
       benchmarks/lod.py TABLE 1 39 -> 40 of 44 cells within 1.1x gltfpack's). On by default
       (LOD step 17); False: every mesh at every ratio. A model of one distinct mesh, and
       chains asked for by errors or screen sizes, are not affected.
+    move_vertices: each step also tries meshoptimizer 1.3's ``simplifyWithUpdate`` on
+      positions alone (gltfpack's ``-sv``), which moves the kept vertices to where they
+      minimise the quadric error instead of keeping them where level 0 has them; like every
+      candidate it is kept only where its estimated Hausdorff distance is lower. A level it
+      makes (or one simplified from such a level) gets its own vertex rows after level 0's
+      (docs/FORMAT.md); its other attributes are those of the vertex it moved. Needs the
+      WASM build (:mod:`pipelines.meshopt_wasm`; scripts/setup.sh installs it); without it
+      the option does nothing (the LOD step's cache key names which).
     dedupe_triangles: before simplifying, drop triangles whose three corners coincide with an
       earlier triangle's (same winding); where the material is double-sided also those with
       the reverse winding (the back face renders anyway). Level 0 is written without them.
@@ -150,6 +158,7 @@ class LodOptions:
     geometry_candidate: bool = False
     lock_fraction: float = 0.0
     balance_meshes: bool = True
+    move_vertices: bool = True
 
     def __post_init__(self) -> None:
         from assetpipe.core.errors import ConfigError

@@ -610,7 +610,8 @@ def measure_against(
 
 def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
                    lower: Sequence[float | None] | None = None,
-                   engines: Sequence[_Engine | None] | None = None) -> list[SurfaceError]:
+                   engines: Sequence[_Engine | None] | None = None,
+                   positions: Sequence[np.ndarray | None] | None = None) -> list[SurfaceError]:
     """Measure index buffers over the reference's *own* vertex array (LOD levels).
 
     Args: ref from :func:`prepare_reference`; levels: (K, 3) int arrays indexing the
@@ -618,10 +619,16 @@ def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
     positions, faster: vertices and triangles shared by both meshes are exactly 0 apart and
     not queried. ``lower``: per level, a distance already evaluated between it and the
     reference (or None), which starts its bound. ``engines``: per level, None or a BVH
-    already built over ``ref.positions`` and that level's triangles (``_Engine``), reused.
+    already built over that level's positions and triangles (``_Engine``), reused.
+    ``positions``: per level, None (the reference's positions) or its own (N, 3) float64
+    positions in the reference's local frame (a level whose vertices moved): it is then
+    measured as a separate mesh, nothing assumed shared.
     """
-    prepared = [(ref.positions, np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64), True)
-                for l in levels]
+    prepared = []
+    for i, l in enumerate(levels):
+        own = positions[i] if positions is not None else None
+        tri = np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64)
+        prepared.append((ref.positions, tri, True) if own is None else (own, tri, False))
     return _measure(ref, prepared, lower=lower, engines=engines)
 
 

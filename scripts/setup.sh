@@ -20,8 +20,9 @@ if [ -n "$missing" ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
 fi
 
-# Node tools: ktx-parse (a second KTX2 implementation the tests check our files against) and
-# gltfpack (the LOD benchmark's peer), installed locally under .venv/node.
+# Node tools: ktx-parse (a second KTX2 implementation the tests check our files against),
+# gltfpack (the LOD benchmark's peer) and meshoptimizer (its simplifier's WASM build, which the
+# LOD step runs in-process with wasmtime: pipelines/meshopt_wasm.py), installed under .venv/node.
 if ! command -v npm >/dev/null 2>&1; then
   SUDO=""
   [ "$(id -u)" -eq 0 ] || SUDO="sudo"
@@ -41,7 +42,8 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   .venv/bin/python -m pip install -q -e ".[test,farm]"  # farm: the build-farm tests need Dask and s3fs
   touch "$stamp"
 fi
-if [ ! -f .venv/node/node_modules/ktx-parse/package.json ] || [ ! -f .venv/node/node_modules/gltfpack/package.json ]; then
+if [ ! -f .venv/node/node_modules/ktx-parse/package.json ] || [ ! -f .venv/node/node_modules/gltfpack/package.json ] \
+   || [ ! -f .venv/node/node_modules/meshoptimizer/package.json ]; then
   mkdir -p .venv/node
-  npm install --silent --no-audit --no-fund --prefix .venv/node ktx-parse@2.0.0 gltfpack@1.3.0 >/dev/null
+  npm install --silent --no-audit --no-fund --prefix .venv/node ktx-parse@2.0.0 gltfpack@1.3.0 meshoptimizer@1.3.0 >/dev/null
 fi

@@ -459,3 +459,88 @@ def test_the_build_measures_on_as_many_threads_as_jobs(monkeypatch, tmp_path):
                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f))
     report = run_build([obj], tmp_path / "out", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache")
     assert report.counts() == {"built": 1} and seen == [1]
+
+
+# ----------------------------------------------------------------------------- moved vertices
+
+
+def test_moved_levels_get_their_own_vertex_rows():
+    """A level with moved vertices indexes rows of its own after level 0's: copies of the rows
+    of the vertices it moved (their other attributes) with the moved positions; levels over
+    level 0's vertices keep the prefix layout."""
+    import dataclasses
+
+    from assetpipe.pipelines.lod import LodLevel
+    from assetpipe.pipelines.lod_model import vertex_layout
+
+    v, f = _bumpy_sphere(2)
+    uv = np.stack([v[:, 0], v[:, 1]], 1).astype(np.float32)
+    verts = np.hstack([v, uv]).astype(np.float32)
+    n = len(v)
+    lv0 = LodLevel(0, f, len(f), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    plain = dataclasses.replace(lv0, level=1, indices=f[: len(f) // 2], triangles=len(f) // 2)
+    moved_pos = v * 1.01
+    moved_tri = np.ascontiguousarray(f[len(f) // 2: len(f) // 2 + 40])
+    moved = dataclasses.replace(lv0, level=2, indices=moved_tri, triangles=40, positions=moved_pos)
+    rows, levels, counts, starts = vertex_layout(verts, [lv0, plain, moved])
+    ids = np.unique(moved_tri)
+    assert rows.shape == (n + ids.size, verts.shape[1])
+    assert starts == (0, 0, n) and counts[2] == n + ids.size and counts[1] <= counts[0] <= n
+    assert all(lv.positions is None for lv in levels)
+    # level 0 and the plain level draw the same triangles as before, a prefix each
+    for k in (0, 1):
+        assert levels[k].indices.max() < counts[k]
+        assert np.array_equal(rows[levels[k].indices][..., :3], verts[[lv0, plain][k].indices][..., :3])
+    # the moved level: its own rows, the moved positions and the vertices' own UVs
+    own = levels[2].indices
+    assert own.min() == n and own.max() == n + ids.size - 1
+    assert np.allclose(rows[own][..., :3], moved_pos[moved_tri].astype(np.float32))
+    assert np.array_equal(rows[own][..., 3:], uv[moved_tri])
+
+
+def test_moved_levels_measure_lower_and_their_bound_holds():
+    """On a smooth bumpy sphere meshoptimizer's simplifyWithUpdate (move_vertices) makes levels
+    nearer level 0 than keeping vertices in place, at the same counts (+- a triangle); the
+    recorded bound of a moved level is still >= a dense two-sided measurement of it."""
+    from assetpipe.pipelines import meshopt_wasm
+    from assetpipe.pipelines.surface_error import points_to_mesh_distance, sample_surface
+
+    assert meshopt_wasm.available(), "scripts/setup.sh installs npm meshoptimizer@1.3.0 and wasmtime"
+    v, f = _bumpy_sphere(4, seed=2)
+    opts = LodOptions(error_samples=4000, ratios=(1, 1 / 2, 1 / 4, 1 / 8))
+    on = build_model_lods([_part(v, f)], opts)[0]
+    off = build_model_lods([_part(v, f)], LodOptions(error_samples=4000, ratios=opts.ratios,
+                                                     move_vertices=False))[0]
+    assert len(on.levels) == len(off.levels) == 4
+    assert any(s > 0 for s in on.vertex_starts) and not any(off.vertex_starts)
+    for a, b in zip(on.levels[1:], off.levels[1:]):
+        assert abs(a.triangles - b.triangles) <= 2
+    # lower at every level by more than the bound's tolerance (5%)
+    assert all(a.hausdorff < 0.95 * b.hausdorff for a, b in zip(on.levels[1:], off.levels[1:])), \
+        ([a.hausdorff for a in on.levels], [b.hausdorff for b in off.levels])
+    pos = on.vertices[:, :3].astype(np.float64)
+    ref = on.levels[0].indices.astype(np.int64)
+    for k, lv in enumerate(on.levels[1:], start=1):
+        tri = lv.indices.astype(np.int64)
+        fwd = points_to_mesh_distance(np.vstack([sample_surface(pos, ref, 100_000, 1), pos[np.unique(ref)]]), pos, tri)
+        bwd = points_to_mesh_distance(np.vstack([sample_surface(pos, tri, 100_000, 2), pos[np.unique(tri)]]), pos, ref)
+        dense = max(fwd.max(), bwd.max())
+        assert lv.hausdorff >= dense, (k, lv.hausdorff, dense)
+        assert lv.hausdorff <= 1.25 * dense, (k, lv.hausdorff, dense)
+
+
+def test_affine_copies_map_moved_vertices():
+    """A copy of a mesh reuses its chain: a moved level's vertices are the affine image of the
+    original's moved vertices (within float32 rounding of the copy's size)."""
+    v, f = _bumpy_sphere(3, seed=4)
+    rot = trimesh.transformations.rotation_matrix(0.4, [0, 1, 1])[:3, :3]
+    lin = rot @ np.diag([3.0, 3.0, 3.0])
+    parts = [_part(v, f, key=0), _part(v @ lin.T + [5, -2, 1], f, key=1)]
+    a, b = build_model_lods(parts, FAST)
+    assert b.copy_of == 0 and a.vertex_starts == b.vertex_starts and any(a.vertex_starts)
+    for la, lb, s in zip(a.levels, b.levels, a.vertex_starts):
+        if not s:
+            continue
+        pa = a.vertices[la.indices.reshape(-1), :3].astype(np.float64)
+        pb = b.vertices[lb.indices.reshape(-1), :3].astype(np.float64)
+        assert np.allclose(pa @ lin.T + [5, -2, 1], pb, atol=1e-5 * 3 * 2)

@@ -44,12 +44,15 @@ def mesh_diagonals(model) -> np.ndarray:
 def boundary_lengths(model, lod: int) -> np.ndarray:
     """(meshes,) length of each mesh's open edges (used by exactly one triangle) at LOD ``lod``.
 
-    Vertices are not welded: a UV or normal seam counts as open in every level alike, and
-    simplification keeps seams (shortened, never lengthened), so the growth over LOD0 is what
-    the level opened. Edges are 1-D integer keys (uint32 when the mesh has under 65,536
-    vertices, else int64), so a million triangles take a sort of 3M integers. Meshes with the same
-    indices (placed copies of one mesh: MetalRoughSpheresNoTextures' 99 spheres) have the same open
-    edges as index pairs: found once, measured on each mesh's own positions.
+    Vertices at identical positions are one (:func:`position_ids`): a UV or normal seam is
+    closed, and a crack between its two sides (the copies apart) is open. (Unwelded, a seam
+    counted as open in every level alike, which held while simplification only shortened seams;
+    a level whose vertices moved (docs/FORMAT.md) can lengthen one without opening it: spider's
+    legs at LOD3 1.07x their LOD0 seam length, closed.) Edges are 1-D integer keys (uint32 when
+    the mesh has under 65,536 vertices, else int64), so a million triangles take a sort of 3M
+    integers. Meshes with the same indices and welding (placed copies of one mesh:
+    MetalRoughSpheresNoTextures' 99 spheres) have the same open edges as index pairs: found once,
+    measured on each mesh's own positions.
     """
     import hashlib  # noqa: PLC0415
 
@@ -63,6 +66,8 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
         if not len(t):
             continue
         pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
+        ids = _welded(model, i, pos)
+        t = ids[t]
         key = (mesh.vertex_count, t.size, hashlib.blake2b(t.tobytes(), digest_size=20).digest())
         if key in found:
             u, v = found[key]
@@ -88,6 +93,32 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
 
 
 LOD_MAX_OPEN_EDGE_GROWTH = 0.05  # diagonals; see LodsCheck.reason
+
+
+def position_ids(pos: np.ndarray) -> np.ndarray:
+    """(N,) for float32 positions (N, 3): each vertex's first vertex at the identical position
+    (the same dtype as an index: uint32, or int64 from 2^32 vertices). -0.0 and 0.0 are one."""
+    n = pos.shape[0]
+    q = np.ascontiguousarray(pos.astype(np.float32) + np.float32(0.0)).view(np.uint32).reshape(n, 3)
+    order = np.lexsort((q[:, 2], q[:, 1], q[:, 0]))  # stable: equal rows keep index order
+    s = q[order]
+    new = np.r_[True, np.any(s[1:] != s[:-1], axis=1)] if n else np.zeros(0, bool)
+    ids = np.empty(n, np.int64)
+    ids[order] = order[new][np.cumsum(new) - 1]
+    return ids.astype(np.uint32) if n < 2**32 else ids
+
+
+_WELDS: dict = {}  # (id(model), mesh) -> (positions array, ids): one welding per mesh for all levels
+
+
+def _welded(model, i: int, pos: np.ndarray) -> np.ndarray:
+    got = _WELDS.get((id(model), i))
+    if got is None or got[0] is not model.positions:
+        if len(_WELDS) > 64:
+            _WELDS.clear()
+        got = (model.positions, position_ids(pos))
+        _WELDS[(id(model), i)] = got
+    return got[1]
 
 
 def nearest_drawn(model, point: np.ndarray) -> np.ndarray | None:
@@ -131,9 +162,10 @@ class LodsCheck(Check):
               "a level over the budget is rendered again at supersample (4) x the pixels a side and judged "
               "on that picture in the same pixel units (sub-pixels more than 4 from the other's silhouette, "
               "each 1/16 px), where a hole still shows. "
-              "Holes a double-sided closed mesh hides in every picture show as open edges (seams included, "
-              "unwelded): simplifying straightens borders and seams, so LOD k's open edges were never longer "
-              "than LOD0's (growth never above 0 over 74 LOD levels of 19 corpus and generated models); 0.05 "
+              "Holes a double-sided closed mesh hides in every picture show as open edges (vertices at identical "
+              "positions welded, so seams are closed and a crack between a seam's sides is open): simplifying "
+              "straightens borders, so LOD k's open edges were never longer than LOD0's (growth never above 0 "
+              "over 74 LOD levels of 19 corpus and generated models, seams then counted unwelded); 0.05 "
               "diagonals leaves room for a border vertex moved by its Hausdorff error. Per mesh as well: a hole in "
               "a small part of a large model is small against the model's diagonal (2CylinderEngine: under 0.05) "
               "but not against the part's (3.36 of its diagonal); per-mesh growth was never above 0 either "

@@ -1,0 +1,74 @@
+"""meshoptimizer 1.3's WASM simplifier run in-process (pipelines/meshopt_wasm.py)."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+import trimesh
+
+from assetpipe.pipelines import meshopt_wasm
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _installed():
+    # scripts/setup.sh installs both; a missing one is a broken setup, not a reason to skip
+    assert meshopt_wasm.available(), f"npm {meshopt_wasm.NPM_PACKAGE} (scripts/setup.sh) and wasmtime are needed"
+
+
+def _seamed_sphere():
+    """A UV sphere whose seam (u = 0 and u = 1) is split: two vertices at each seam position."""
+    nu, nv = 48, 24
+    u, w = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0.05, 0.95, nv), indexing="ij")
+    th, ph = u * 2 * np.pi, w * np.pi
+    r = 1 + 0.1 * np.sin(5 * th) * np.sin(3 * ph)
+    pos = np.stack([r * np.cos(th) * np.sin(ph), r * np.sin(th) * np.sin(ph), r * np.cos(ph)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv - 1), indexing="ij")
+    a, b = i * nv + j, (i + 1) * nv + j
+    f = np.concatenate([np.stack([a, b, b + 1], -1).reshape(-1, 3), np.stack([a, b + 1, a + 1], -1).reshape(-1, 3)])
+    return pos.astype(np.float32), f.astype(np.uint32)
+
+
+def test_the_embedded_module_decodes_to_wasm():
+    data = meshopt_wasm._decode(meshopt_wasm.js_path().read_text())
+    assert data[:4] == b"\0asm" and len(data) > 10_000
+    assert meshopt_wasm.version() == "1.3.0"
+
+
+def test_simplify_with_update_moves_kept_vertices_and_keeps_seams_closed():
+    pos, f = _seamed_sphere()
+    out, moved, err = meshopt_wasm.simplify_with_update(pos, f, len(f) // 4)
+    assert 0 < out.shape[0] <= len(f) // 4 and out.max() < len(pos) and err > 0
+    used = np.unique(out)
+    changed = np.any(moved != pos, axis=1)
+    assert changed[used].mean() > 0.5  # most kept vertices moved
+    assert not changed[np.setdiff1d(np.arange(len(pos)), used)].any()  # the others as given
+    # the two vertices of each seam position move together: no crack opens
+    nv = 24
+    first, last = np.arange(nv), 48 * nv + np.arange(nv)
+    both = np.isin(first, used) & np.isin(last, used)
+    assert both.any()
+    assert np.array_equal(moved[first[both]], moved[last[both]])
+
+
+def test_results_do_not_depend_on_threads():
+    v = np.asarray(trimesh.creation.icosphere(4).vertices, np.float32)
+    v = v * (1 + 0.05 * np.sin(4 * v[:, :1]))
+    f = np.asarray(trimesh.creation.icosphere(4).faces, np.uint32)
+    targets = [len(f) // k for k in (2, 3, 5, 8)]
+    alone = [meshopt_wasm.simplify_with_update(v, f, t) for t in targets]
+    with ThreadPoolExecutor(2) as pool:
+        threaded = list(pool.map(lambda t: meshopt_wasm.simplify_with_update(v, f, t), targets))
+    for (a, pa, ea), (b, pb, eb) in zip(alone, threaded):
+        assert np.array_equal(a, b) and np.array_equal(pa, pb) and ea == eb
+
+
+def test_memory_is_given_back():
+    pos, f = _seamed_sphere()
+    meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
+    store, _, _, sbrk = meshopt_wasm._instance()
+    top = sbrk(store, 0)
+    for _ in range(3):
+        meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
+    assert sbrk(store, 0) == top
