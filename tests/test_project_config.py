@@ -104,3 +104,23 @@ def test_lod_balance_from_the_project_file_and_the_flag(proj):
     (proj / "proj" / "assetpipe.toml").write_text('lod_balance = "no"\n')
     r = build(proj)
     assert r.exit_code != 0 and "lod_balance" in r.output
+
+
+def test_lod_move_from_the_project_file_and_the_flag(proj):
+    """lod_move (--lod-move/--no-lod-move) reaches LodOptions.move_vertices; the default is
+    LodOptions' own (what it does to the levels: tests/test_lod_model.py)."""
+    from assetpipe.cli import _build_options
+    from assetpipe.options import DEFAULT_BUILD_OPTIONS
+
+    assert _build_options("position,uv0", None, False, None, False, None).lod.move_vertices \
+        is DEFAULT_BUILD_OPTIONS.lod.move_vertices
+    assert _build_options("position,uv0", None, False, None, False, None, lod_move=False).lod.move_vertices is False
+    (proj / "proj" / "assetpipe.toml").write_text("lod_move = false\njobs = 1\n")
+    r = build(proj, "--explain")
+    assert r.exit_code == 0, r.output
+    assert f"option lod-move: False ({proj / 'proj' / 'assetpipe.toml'})" in r.output
+    r = build(proj, "--lod-move", "--explain")
+    assert r.exit_code == 0 and "option lod-move: True (command line)" in r.output
+    (proj / "proj" / "assetpipe.toml").write_text('lod_move = "no"\n')
+    r = build(proj)
+    assert r.exit_code != 0 and "lod_move" in r.output
