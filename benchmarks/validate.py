@@ -27,6 +27,7 @@ side by side).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -286,6 +287,11 @@ def rendered_change(original: Path, mutated: Path, opts: ValidateOptions) -> dic
                                             f"{opts.role_tolerance:.4f})"}
 
 
+def _triangles(model: Path) -> int:
+    side = json.loads(model.with_name(model.name[:-5] + ".asset.json").read_text())
+    return int(side.get("stats", {}).get("triangles", 0))
+
+
 def mutations(args: argparse.Namespace) -> int:
     """Apply every mutation to every model it applies to; print the catch rate per kind."""
     import shutil  # noqa: PLC0415
@@ -303,7 +309,8 @@ def mutations(args: argparse.Namespace) -> int:
         opts = ValidateOptions(width=args.size, height=args.size, source_root=str(CORPUS))
         clean = validate_batch(models, opts, jobs=args.jobs)
         false_alarms = [f for r in clean for f in r.failures()]
-        good = [Path(r.model) for r in clean if r.passed]
+        # a model without triangles (points and lines only) has no geometry to mutate
+        good = [Path(r.model) for r in clean if r.passed and _triangles(Path(r.model))]
         jobs: list[tuple[str, Path]] = []
         sources: list[Path] = []
         for kind, (mutate, _, _) in MUTATIONS.items():

@@ -231,8 +231,12 @@ def _simplify_moving(pos32: np.ndarray, src: np.ndarray, target: int,
     # fixtures' sphere showed 1.68 diagonals of open edges at LOD1). Exact seams move together.
     options = meshopt_wasm.SPARSE | meshopt_wasm.ERROR_ABSOLUTE | meshopt_wasm.LOCK_BORDER
     limit = min(float(target_error) * extent if extent > 0 else float(target_error), 3.0e38)
-    out, moved, err = meshopt_wasm.simplify_with_update(pos32, src, target, target_error=limit,
-                                                        options=options)
+    try:
+        out, moved, err = meshopt_wasm.simplify_with_update(pos32, src, target, target_error=limit,
+                                                            options=options)
+    except meshopt_wasm.SimplifierFailed:
+        # no moved candidate for this step (a mesh beyond the WASM's memory): the others stand
+        return np.zeros((0, 3), np.uint32), pos32, math.inf
     if not np.isfinite(moved[np.unique(out.reshape(-1))]).all():
         return np.zeros((0, 3), np.uint32), moved, math.inf  # never a non-finite vertex
     return out, moved, err / diag if diag > 0 else err

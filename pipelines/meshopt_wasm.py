@@ -43,6 +43,15 @@ PRUNE = 8
 REGULARIZE = 16
 PERMISSIVE = 32
 
+#: bytes of WASM memory one instance may grow to (wasm32 addresses 4 GiB at most); a mesh that
+#: needs more fails with :class:`SimplifierFailed` and its level is made without moved vertices
+MEMORY_LIMIT = 3 << 30
+
+
+class SimplifierFailed(RuntimeError):
+    """The WASM simplifier trapped or ran out of memory (the instance is dropped and remade)."""
+
+
 _lock = threading.Lock()
 _module = None  # (engine, module) compiled once per process
 _local = threading.local()  # one store and instance per thread (wasmtime stores are not shared)
@@ -147,6 +156,7 @@ def _instance():
             _module = (engine, wasmtime.Module(engine, _decode(p.read_text())))
     engine, module = _module
     store = wasmtime.Store(engine)
+    store.set_limits(memory_size=MEMORY_LIMIT)
     with _lock:
         _stores.append(store)
     instance = wasmtime.Instance(store, module, [])
@@ -175,6 +185,8 @@ def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_
     idx = np.ascontiguousarray(indices, np.uint32).reshape(-1)
     if idx.size == 0:
         return np.zeros((0, 3), np.uint32), pos.copy(), 0.0
+    import wasmtime
+
     store, ex, mem, sbrk = _instance()
     base = sbrk(store, 0)
     try:
@@ -182,7 +194,7 @@ def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_
             b = a.tobytes()
             p = sbrk(store, len(b))
             if p < 0 or p == 0xFFFFFFFF:
-                raise MemoryError("meshoptimizer WASM: out of memory")
+                raise SimplifierFailed(f"meshoptimizer's WASM simplifier: out of memory ({len(b)} more bytes)")
             mem.write(store, b, p)
             return p
 
@@ -195,9 +207,18 @@ def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_
         out = np.frombuffer(mem.read(store, ip, ip + 4 * n), np.uint32).reshape(-1, 3).copy()
         moved = np.frombuffer(mem.read(store, pp, pp + pos.nbytes), np.float32).reshape(-1, 3).copy()
         err = float(np.frombuffer(mem.read(store, te, te + 4), np.float32)[0])
+    except (wasmtime.Trap, wasmtime.WasmtimeError) as e:
+        _local.inst = None  # a trap can leave the instance's stack and heap inconsistent: remade next call
+        # wasmtime's message: a backtrace, then the cause ("wasm trap: out of bounds memory
+        # access" when its allocator ran out of the memory limit)
+        cause = [ln.strip() for ln in str(e).splitlines() if "trap" in ln or "fault" in ln]
+        raise SimplifierFailed("meshoptimizer's WASM simplifier failed: "
+                               + ("; ".join(cause) or str(e).splitlines()[0])) from e
     finally:
-        sbrk(store, base - sbrk(store, 0))
+        if getattr(_local, "inst", None) is not None:
+            sbrk(store, base - sbrk(store, 0))
     return out, moved, err
 
 
-__all__ = ["available", "version", "js_path", "simplify_with_update", "NPM_PACKAGE"]
+__all__ = ["available", "version", "js_path", "simplify_with_update", "NPM_PACKAGE", "SimplifierFailed",
+           "MEMORY_LIMIT"]

@@ -72,3 +72,25 @@ def test_memory_is_given_back():
     for _ in range(3):
         meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
     assert sbrk(store, 0) == top
+
+
+def test_out_of_memory_is_a_clear_failure_and_the_instance_recovers(monkeypatch):
+    """A mesh beyond the instance's memory (here a 4 MiB limit; wasm32's is 4 GiB) fails with
+    SimplifierFailed, and the next call in that thread works again on a fresh instance."""
+    from assetpipe.pipelines import lod
+
+    pos, f = _seamed_sphere()
+    big = np.vstack([pos + [3.0 * k, 0, 0] for k in range(40)]).astype(np.float32)
+    bigf = np.vstack([f + len(pos) * k for k in range(40)]).astype(np.uint32)
+    monkeypatch.setattr(meshopt_wasm, "MEMORY_LIMIT", 4 << 20)
+    meshopt_wasm._local.inst = None  # a fresh instance under the limit
+    with pytest.raises(meshopt_wasm.SimplifierFailed, match="WASM simplifier"):
+        meshopt_wasm.simplify_with_update(big, bigf, len(bigf) // 2)
+    # the LOD step takes it as "no moved candidate this step"
+    out, _, err = lod._simplify_moving(big, bigf, len(bigf) // 2, 1e9)
+    assert out.shape == (0, 3) and err == np.inf
+    # a small mesh in the same thread, under the same limit, works: no state left from the failure
+    out, moved, _ = meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
+    assert 0 < out.shape[0] <= len(f) // 2
+    assert np.array_equal(out, meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)[0])
+    meshopt_wasm._local.inst = None  # later tests get an instance under the normal limit
