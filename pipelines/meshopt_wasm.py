@@ -54,9 +54,12 @@ class SimplifierFailed(RuntimeError):
 
 _lock = threading.Lock()
 _module = None  # (engine, module) compiled once per process
-_local = threading.local()  # one store and instance per thread (wasmtime stores are not shared)
 _path_cache: list = []
-_stores: list = []  # every store made, closed at exit before the module and engine
+# idle instances (store, exports, memory, sbrk): a call takes one (or makes one) and gives it
+# back, so there are never more than the calls running at once (a wasmtime store is used by one
+# thread at a time), whichever threads make them; each keeps the memory it grew to
+_idle: list = []
+_live: set = set()  # every store not yet closed, closed at exit before the module and engine
 
 
 @atexit.register
@@ -64,9 +67,11 @@ def _close() -> None:
     """Free wasmtime's objects in order while the interpreter still can (their finalisers fail
     once it has torn wasmtime's module down)."""
     global _module
-    for store in _stores:
-        store.close()
-    _stores.clear()
+    with _lock:
+        for store in list(_live):
+            store.close()
+        _live.clear()
+        _idle.clear()
     if _module is not None:
         _module[1].close()
         _module[0].close()
@@ -139,11 +144,37 @@ def _decode(js: str) -> bytes:
     return bytes(out)
 
 
-def _instance():
+def _acquire():
+    """An idle instance, or a new one."""
+    with _lock:
+        if _idle:
+            return _idle.pop()
+    return _new_instance()
+
+
+def _release(inst, broken: bool = False) -> None:
+    """Give ``inst`` back (or, ``broken``: close it: a trap can leave its stack and heap
+    inconsistent)."""
+    with _lock:
+        if broken:
+            _live.discard(inst[0])
+            inst[0].close()
+        else:
+            _idle.append(inst)
+
+
+def reset() -> None:
+    """Close the idle instances (the next call makes a new one, under the current
+    :data:`MEMORY_LIMIT`)."""
+    with _lock:
+        for inst in _idle:
+            _live.discard(inst[0])
+            inst[0].close()
+        _idle.clear()
+
+
+def _new_instance():
     global _module
-    inst = getattr(_local, "inst", None)
-    if inst is not None:
-        return inst
     import wasmtime
 
     with _lock:
@@ -158,13 +189,11 @@ def _instance():
     store = wasmtime.Store(engine)
     store.set_limits(memory_size=MEMORY_LIMIT)
     with _lock:
-        _stores.append(store)
+        _live.add(store)
     instance = wasmtime.Instance(store, module, [])
     ex = instance.exports(store)
     ex["__wasm_call_ctors"](store)
-    inst = (store, ex, ex["memory"], ex["sbrk"])
-    _local.inst = inst
-    return inst
+    return (store, ex, ex["memory"], ex["sbrk"])
 
 
 def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_triangles: int, *,
@@ -187,8 +216,10 @@ def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_
         return np.zeros((0, 3), np.uint32), pos.copy(), 0.0
     import wasmtime
 
-    store, ex, mem, sbrk = _instance()
+    inst = _acquire()
+    store, ex, mem, sbrk = inst
     base = sbrk(store, 0)
+    broken = False
     try:
         def put(a) -> int:
             b = a.tobytes()
@@ -208,17 +239,18 @@ def simplify_with_update(positions: "np.ndarray", indices: "np.ndarray", target_
         moved = np.frombuffer(mem.read(store, pp, pp + pos.nbytes), np.float32).reshape(-1, 3).copy()
         err = float(np.frombuffer(mem.read(store, te, te + 4), np.float32)[0])
     except (wasmtime.Trap, wasmtime.WasmtimeError) as e:
-        _local.inst = None  # a trap can leave the instance's stack and heap inconsistent: remade next call
+        broken = True
         # wasmtime's message: a backtrace, then the cause ("wasm trap: out of bounds memory
         # access" when its allocator ran out of the memory limit)
         cause = [ln.strip() for ln in str(e).splitlines() if "trap" in ln or "fault" in ln]
         raise SimplifierFailed("meshoptimizer's WASM simplifier failed: "
                                + ("; ".join(cause) or str(e).splitlines()[0])) from e
     finally:
-        if getattr(_local, "inst", None) is not None:
+        if not broken:
             sbrk(store, base - sbrk(store, 0))
+        _release(inst, broken)
     return out, moved, err
 
 
 __all__ = ["available", "version", "js_path", "simplify_with_update", "NPM_PACKAGE", "SimplifierFailed",
-           "MEMORY_LIMIT"]
+           "MEMORY_LIMIT", "reset"]

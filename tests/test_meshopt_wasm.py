@@ -64,13 +64,20 @@ def test_results_do_not_depend_on_threads():
         assert np.array_equal(a, b) and np.array_equal(pa, pb) and ea == eb
 
 
-def test_memory_is_given_back():
+def test_memory_is_given_back_and_instances_are_reused():
+    """Each call gives its heap back, and its instance to the pool: calls one after another,
+    from one thread or several, keep reusing the same instance."""
+    meshopt_wasm.reset()
     pos, f = _seamed_sphere()
     meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
-    store, _, _, sbrk = meshopt_wasm._instance()
+    assert len(meshopt_wasm._idle) == 1
+    store, _, _, sbrk = meshopt_wasm._idle[0]
     top = sbrk(store, 0)
     for _ in range(3):
         meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
+    with ThreadPoolExecutor(1) as pool:  # a new thread takes the idle instance too
+        pool.submit(meshopt_wasm.simplify_with_update, pos, f, len(f) // 2).result()
+    assert len(meshopt_wasm._idle) == 1 and meshopt_wasm._idle[0][0] is store
     assert sbrk(store, 0) == top
 
 
@@ -83,7 +90,7 @@ def test_out_of_memory_is_a_clear_failure_and_the_instance_recovers(monkeypatch)
     big = np.vstack([pos + [3.0 * k, 0, 0] for k in range(40)]).astype(np.float32)
     bigf = np.vstack([f + len(pos) * k for k in range(40)]).astype(np.uint32)
     monkeypatch.setattr(meshopt_wasm, "MEMORY_LIMIT", 4 << 20)
-    meshopt_wasm._local.inst = None  # a fresh instance under the limit
+    meshopt_wasm.reset()  # a fresh instance under the limit
     with pytest.raises(meshopt_wasm.SimplifierFailed, match="WASM simplifier"):
         meshopt_wasm.simplify_with_update(big, bigf, len(bigf) // 2)
     # the LOD step takes it as "no moved candidate this step"
@@ -93,4 +100,4 @@ def test_out_of_memory_is_a_clear_failure_and_the_instance_recovers(monkeypatch)
     out, moved, _ = meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)
     assert 0 < out.shape[0] <= len(f) // 2
     assert np.array_equal(out, meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)[0])
-    meshopt_wasm._local.inst = None  # later tests get an instance under the normal limit
+    meshopt_wasm.reset()  # later calls get an instance under the normal limit
