@@ -23,6 +23,20 @@ def main() -> None:
     """Content-hashed asset pipeline: glTF 2.0 / OBJ to engine-ready idx/vtx/json."""
 
 
+def lod_move_note(lod) -> str | None:
+    """A note when LOD levels may move vertices (``LodOptions.move_vertices``) but meshoptimizer's
+    WASM simplifier is not installed here, so they will not; None otherwise."""
+    if lod is None or not lod.move_vertices:
+        return None
+    from assetpipe.pipelines import meshopt_wasm
+
+    if meshopt_wasm.available():
+        return None
+    return (f"note: LOD levels will not move vertices (--lod-move): meshoptimizer's WASM simplifier is not "
+            f"installed (npm {meshopt_wasm.NPM_PACKAGE} under .venv/node, which scripts/setup.sh installs, or "
+            "ASSETPIPE_MESHOPT_JS naming its meshopt_simplifier.js; and the wasmtime package)")
+
+
 def _build_options(layout: str, lod_ratios: str | None, no_lod: bool, simplifier: str | None,
                    lock_border: bool, max_texture_size: int | None, recenter: bool = False,
                    lod_max_error: float | None = None, lod_screen_sizes: str | None = None,
@@ -227,6 +241,9 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
     if max_image_pixels != options.texture.max_pixels:
         options = dataclasses.replace(options, texture=dataclasses.replace(options.texture, max_pixels=max_image_pixels))
     limits = BuildLimits(max_output_bytes=int(max_output_mb * 2**20))
+    note = lod_move_note(options.lod)
+    if note and not quiet:
+        click.echo(note, err=True)
     reporter = Reporter(quiet=quiet, explain=explain)
     try:
         with reporter:

@@ -101,3 +101,19 @@ def test_out_of_memory_is_a_clear_failure_and_the_instance_recovers(monkeypatch)
     assert 0 < out.shape[0] <= len(f) // 2
     assert np.array_equal(out, meshopt_wasm.simplify_with_update(pos, f, len(f) // 2)[0])
     meshopt_wasm.reset()  # later calls get an instance under the normal limit
+
+
+def test_a_missing_simplifier_is_named_when_levels_would_move(monkeypatch, tmp_path):
+    """Without the npm package the option does nothing: the build says so (and the WASM's
+    version, None, is in the keys), and says nothing when it is installed or not asked for."""
+    from assetpipe.cli import lod_move_note
+    from assetpipe.pipelines.lod_options import LodOptions
+
+    assert lod_move_note(LodOptions()) is None  # installed here
+    monkeypatch.setenv("ASSETPIPE_MESHOPT_JS", str(tmp_path / "missing.js"))
+    monkeypatch.setattr(meshopt_wasm, "_path_cache", [])  # looked up again under the variable
+    assert meshopt_wasm.js_path() is None and meshopt_wasm.version() is None
+    note = lod_move_note(LodOptions())
+    assert note is not None and "meshoptimizer@1.3.0" in note and "ASSETPIPE_MESHOPT_JS" in note
+    assert lod_move_note(LodOptions(move_vertices=False)) is None
+    assert lod_move_note(None) is None  # --no-lod
