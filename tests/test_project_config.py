@@ -86,41 +86,24 @@ def test_inputs_under_different_project_files_are_refused(tmp_path):
         project_config_for([tmp_path / "a", tmp_path / "b"])
 
 
-def test_lod_balance_from_the_project_file_and_the_flag(proj):
-    """lod_balance (--lod-balance/--no-lod-balance) reaches LodOptions.balance_meshes; the
-    default is LodOptions' own."""
+@pytest.mark.parametrize("key, field", [("lod_balance", "balance_meshes"), ("lod_move", "move_vertices")])
+def test_lod_switches_from_the_project_file_and_the_flag(proj, key, field):
+    """lod_balance (--lod-balance/--no-lod-balance) reaches LodOptions.balance_meshes, lod_move
+    (--lod-move/--no-lod-move) LodOptions.move_vertices (what it does to the levels:
+    tests/test_lod_model.py); the default is LodOptions' own."""
     from assetpipe.cli import _build_options
     from assetpipe.options import DEFAULT_BUILD_OPTIONS
 
-    assert _build_options("position,uv0", None, False, None, False, None).lod.balance_meshes \
-        is DEFAULT_BUILD_OPTIONS.lod.balance_meshes
-    assert _build_options("position,uv0", None, False, None, False, None, lod_balance=False).lod.balance_meshes is False
-    (proj / "proj" / "assetpipe.toml").write_text("lod_balance = false\njobs = 1\n")
+    assert getattr(_build_options("position,uv0", None, False, None, False, None).lod, field) \
+        is getattr(DEFAULT_BUILD_OPTIONS.lod, field)
+    assert getattr(_build_options("position,uv0", None, False, None, False, None, **{key: False}).lod, field) is False
+    flag = key.replace("_", "-")
+    (proj / "proj" / "assetpipe.toml").write_text(f"{key} = false\njobs = 1\n")
     r = build(proj, "--explain")
     assert r.exit_code == 0, r.output
-    assert f"option lod-balance: False ({proj / 'proj' / 'assetpipe.toml'})" in r.output
-    r = build(proj, "--lod-balance", "--explain")
-    assert r.exit_code == 0 and "option lod-balance: True (command line)" in r.output
-    (proj / "proj" / "assetpipe.toml").write_text('lod_balance = "no"\n')
+    assert f"option {flag}: False ({proj / 'proj' / 'assetpipe.toml'})" in r.output
+    r = build(proj, f"--{flag}", "--explain")
+    assert r.exit_code == 0 and f"option {flag}: True (command line)" in r.output
+    (proj / "proj" / "assetpipe.toml").write_text(f'{key} = "no"\n')
     r = build(proj)
-    assert r.exit_code != 0 and "lod_balance" in r.output
-
-
-def test_lod_move_from_the_project_file_and_the_flag(proj):
-    """lod_move (--lod-move/--no-lod-move) reaches LodOptions.move_vertices; the default is
-    LodOptions' own (what it does to the levels: tests/test_lod_model.py)."""
-    from assetpipe.cli import _build_options
-    from assetpipe.options import DEFAULT_BUILD_OPTIONS
-
-    assert _build_options("position,uv0", None, False, None, False, None).lod.move_vertices \
-        is DEFAULT_BUILD_OPTIONS.lod.move_vertices
-    assert _build_options("position,uv0", None, False, None, False, None, lod_move=False).lod.move_vertices is False
-    (proj / "proj" / "assetpipe.toml").write_text("lod_move = false\njobs = 1\n")
-    r = build(proj, "--explain")
-    assert r.exit_code == 0, r.output
-    assert f"option lod-move: False ({proj / 'proj' / 'assetpipe.toml'})" in r.output
-    r = build(proj, "--lod-move", "--explain")
-    assert r.exit_code == 0 and "option lod-move: True (command line)" in r.output
-    (proj / "proj" / "assetpipe.toml").write_text('lod_move = "no"\n')
-    r = build(proj)
-    assert r.exit_code != 0 and "lod_move" in r.output
+    assert r.exit_code != 0 and key in r.output
