@@ -352,6 +352,26 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
 
 # -- encode ---------------------------------------------------------------------------------
 
+def _kept_rows(vertices: np.ndarray, lods: tuple) -> tuple[np.ndarray, tuple]:
+    """The rows a scene's kept levels use (LOD0 dropped): the prefix the kept levels over
+    LOD0's vertices use, then each kept moved level's own rows, moved down to follow it (its
+    indices, ``vertex_start`` and ``vertex_count`` shifted alike). ``lods``: ``OutputLod``s."""
+    import dataclasses
+
+    head = max((lod.vertex_count for lod in lods if not lod.vertex_start), default=0)
+    rows, out, end = [vertices[:head]], [], head
+    for lod in lods:
+        if lod.vertex_start:
+            n = lod.vertex_count - lod.vertex_start
+            rows.append(vertices[lod.vertex_start:lod.vertex_count])
+            shift = lod.vertex_start - end
+            lod = dataclasses.replace(lod, indices=(lod.indices.astype(np.int64) - shift).astype(np.uint32),
+                                      vertex_start=end, vertex_count=end + n)
+            end += n
+        out.append(lod)
+    return np.concatenate(rows), tuple(out)
+
+
 def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[str],
                 materials: list[dict], sources: list[dict], warnings: list[str],
                 keep: list[list[int]] | None = None, position_offset: list[float] | None = None) -> dict:
@@ -384,9 +404,7 @@ def task_encode(store_root: str, model_id: str, lod_digest: str, layout: list[st
                      for k in kept)
         vertices = arrays[f"{i}.vertices"]
         if kept and kept[0] > 0 and not m["lods"][kept[0]].get("handmade"):
-            # the rows the kept levels use: the first one's prefix, and any own rows of a moved
-            # level after it (kept as they are: their indices point there)
-            vertices = vertices[:max(lod.vertex_count for lod in lods)]
+            vertices, lods = _kept_rows(vertices, lods)
         if lods[0].indices.shape[0] == 0:
             warnings.append(f"{m['name']}: no triangles left after dropping degenerate ones; mesh skipped")
             continue

@@ -26,7 +26,7 @@ LOD = 19  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         # 18: a balanced level whose curves stall above its budget gives every mesh its even share
         # 19: a candidate with moved vertices (meshoptimizer 1.3 simplifyWithUpdate, LodOptions.move_vertices): such levels get their own vertex rows
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
-ENCODE = 2  # 2: stats count duplicate triangles; positionOffset
+ENCODE = 3  # 2: stats count duplicate triangles; positionOffset; 3: a scene that skips levels keeps only the rows its kept levels use
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion
 
 STEP_VERSIONS = {"import": IMPORT, "mesh": MESH, "lod": LOD, "texture": TEXTURE, "encode": ENCODE,
