@@ -486,12 +486,14 @@ class Graph:
             imp = a.records["import"]["meta"]  # double-sided materials keep reversed twins apart
             sided = [bool(imp["materials"][m]["doubleSided"]) if 0 <= m < len(imp["materials"]) else False
                      for m in imp["meshMaterials"]]
-            kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout, "doubleSided": sided})
+            groups = steps.material_groups(imp["materials"], imp["meshMaterials"])
+            kin = self._key_inputs("lod", {"mesh": blob}, {"lod": lod_opts, "layout": layout, "doubleSided": sided,
+                                                            "materialGroups": groups})
             # a model's meshes are measured on up to -j threads (local builds; a farm's workers
             # choose for themselves): -j 1 stays on one core
             threads = getattr(self.executor, "jobs", None)
             jobs.append(([a], "lod", kin, (steps.task_lod, str(self.store.root), blob, layout, lod_opts, sided,
-                                           threads)))
+                                           threads, groups)))
         # the LOD work grows with the triangles (measuring each level dominates it)
         costs = [LOD_SECONDS_PER_TRIANGLE * float((a.records.get("mesh") or {}).get("meta", {}).get("triangles", 0))
                  for assets, _, _, _ in jobs for a in assets[:1]]

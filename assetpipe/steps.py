@@ -90,15 +90,7 @@ def task_import(store_root: str, source: str, budgets: dict | None = None) -> di
             images.append(entry)
         return image_index[key]
 
-    materials = []
-    for m in model.materials:
-        textures = {role: {"image": image_ref(ref), "texCoord": ref.tex_coord, "sampler": ref.sampler.to_json()}
-                    for role, ref in m.textures().items()}
-        materials.append({"name": m.name, "baseColorFactor": list(m.base_color_factor),
-                          "alphaMode": m.alpha_mode, "alphaCutoff": m.alpha_cutoff,
-                          "doubleSided": m.double_sided, "metallicFactor": m.metallic_factor,
-                          "roughnessFactor": m.roughness_factor, "emissiveFactor": list(m.emissive_factor),
-                          "textures": textures})
+    materials = [material_description(m, image_ref) for m in model.materials]
     arrays: dict[str, np.ndarray] = {}
     meshes = []
     for i, mesh in enumerate(model.meshes):
@@ -192,10 +184,37 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
 
 # -- LOD ------------------------------------------------------------------------------------
 
+def material_description(m, image_ref) -> dict:
+    """The import step's description of a material (``pipelines.model.Material``), its textures'
+    images named by ``image_ref(texture ref)``."""
+    textures = {role: {"image": image_ref(ref), "texCoord": ref.tex_coord, "sampler": ref.sampler.to_json()}
+                for role, ref in m.textures().items()}
+    return {"name": m.name, "baseColorFactor": list(m.base_color_factor), "alphaMode": m.alpha_mode,
+            "alphaCutoff": m.alpha_cutoff, "doubleSided": m.double_sided, "metallicFactor": m.metallic_factor,
+            "roughnessFactor": m.roughness_factor, "emissiveFactor": list(m.emissive_factor),
+            "textures": textures}
+
+
+def material_groups(materials: list[dict], mesh_materials: list[int]) -> list[int]:
+    """Per mesh, the first material equal in content to its own (everything but the name, as
+    the import step describes it: factors, modes, textures by image and UV set): meshes whose
+    materials are equal in content may be merged for LOD (gltfpack does the same; CAD exports
+    repeat materials: 2CylinderEngine's 34 are 7). A mesh without a valid material keeps its own
+    index."""
+    import json
+
+    first: dict[str, int] = {}
+    canon = [first.setdefault(json.dumps({k: v for k, v in m.items() if k != "name"}, sort_keys=True), i)
+             for i, m in enumerate(materials)]
+    return [canon[m] if 0 <= m < len(canon) else m for m in mesh_materials]
+
+
 def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None,
-             double_sided: list[bool] | None = None, threads: int | None = None) -> dict:
-    """LOD chains of a model (pipelines/lod_model.py): meshes sharing a material and format
-    merged, duplicate triangles dropped, affine copies simplified once, vertices reordered so
+             double_sided: list[bool] | None = None, threads: int | None = None,
+             groups: list[int] | None = None) -> dict:
+    """LOD chains of a model (pipelines/lod_model.py): meshes sharing a material (``groups[i]``:
+    mesh i's material group, :func:`material_groups`; None: its material) and format merged,
+    duplicate triangles dropped, affine copies simplified once, vertices reordered so
     that coarser levels use a prefix. ``double_sided[i]``: mesh i's material is double-sided.
     ``threads``: at most this many of the model's meshes measured at once (the build's ``-j``;
     None: ``LOD_THREADS``); the result does not depend on it."""
@@ -235,7 +254,8 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
                           if a not in ("position", "normal", "tangent"))
             parts.append(LodPart(vertices=verts, positions=verts[:, :3], indices=idx, uv=uv,
                                  normals=normals, others=others, exact=exact,
-                                 group_key=(m["material"], bool(m.get("hasUv"))),
+                                 group_key=(groups[i] if groups is not None else m["material"],
+                                            bool(m.get("hasUv"))),
                                  double_sided=bool(double_sided[i]) if double_sided else False))
         for j, lm in enumerate(build_model_lods(parts, opts, threads=threads)):
             ms = [meta["meshes"][i] for i in lm.parts]

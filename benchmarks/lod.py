@@ -229,6 +229,7 @@ def load_build_meshes(path: Path):
     and mesh processing with the default options (assetpipe.steps task_lod)."""
     from assetpipe.model_import import import_model
     from assetpipe.pipelines.lod_model import LodPart
+    from assetpipe.steps import material_description, material_groups
     from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS
     from assetpipe.pipelines.mesh_process import process_mesh
 
@@ -238,8 +239,11 @@ def load_build_meshes(path: Path):
         cols[a] = slice(c, c + ATTRIBUTE_COMPONENTS[a])
         c += ATTRIBUTE_COMPONENTS[a]
     model = import_model(path)
+    # meshes whose materials are equal in content share a group, as in the build (assetpipe.steps)
+    groups = material_groups([material_description(m, lambda ref: ref.image.digest) for m in model.materials],
+                             [mesh.material for mesh in model.meshes])
     out = []
-    for mesh in model.meshes:
+    for mesh, group in zip(model.meshes, groups):
         pm = process_mesh(mesh, DEFAULT_MESH_OPTIONS)
         if pm.indices.shape[0] == 0:
             continue
@@ -252,7 +256,7 @@ def load_build_meshes(path: Path):
         mat = model.materials[mesh.material] if 0 <= mesh.material < len(model.materials) else None
         out.append(LodPart(vertices=v, positions=v[:, :3].astype(np.float64), indices=pm.indices,
                            uv=uv, normals=normals, others=others, exact=exact,
-                           group_key=(mesh.material, uv is not None),
+                           group_key=(group, uv is not None),
                            double_sided=bool(mat.double_sided) if mat is not None else False))
     return out
 

@@ -37,3 +37,34 @@ def test_a_scene_that_drops_lod0_keeps_only_the_rows_its_levels_use():
     vertices, lods = _kept_rows(rows, (moved,))
     assert vertices.shape == (4, 5) and (lods[0].vertex_start, lods[0].vertex_count) == (0, 4)
     assert np.array_equal(rows[moved.indices], vertices[lods[0].indices])
+
+
+def test_materials_equal_in_content_share_a_lod_group():
+    """Names do not matter, everything else does; a mesh without a valid material keeps its
+    index (so it is never merged with a real one)."""
+    from assetpipe.steps import material_groups
+
+    def mat(name, colour=(1, 1, 1, 1), image=None, tex_coord=0):
+        tex = {} if image is None else {"baseColor": {"image": image, "texCoord": tex_coord, "sampler": {}}}
+        return {"name": name, "baseColorFactor": list(colour), "alphaMode": "OPAQUE", "alphaCutoff": 0.5,
+                "doubleSided": False, "metallicFactor": 1.0, "roughnessFactor": 1.0,
+                "emissiveFactor": [0, 0, 0], "textures": tex}
+
+    mats = [mat("steel"), mat("steel.001"), mat("red", (1, 0, 0, 1)), mat("wood", image=0),
+            mat("wood.001", image=0), mat("wood-uv1", image=0, tex_coord=1), mat("oak", image=1)]
+    assert material_groups(mats, [0, 1, 2, 3, 4, 5, 6, -1, 1]) == [0, 0, 2, 3, 3, 5, 6, -1, 0]
+
+
+def test_meshes_with_materials_equal_in_content_are_merged_for_lod(corpus, tmp_path):
+    """2CylinderEngine's 34 materials are 7 by content: its LOD meshes are merged into 7, as
+    gltfpack merges them (docs/BUILD.md)."""
+    import json
+
+    from assetpipe.build import run_build
+    from assetpipe.options import DEFAULT_BUILD_OPTIONS
+
+    src = corpus / "models/2CylinderEngine/glTF/2CylinderEngine.gltf"
+    r = run_build([src], tmp_path / "out", DEFAULT_BUILD_OPTIONS, cache_dir=tmp_path / "cache")
+    assert not r.failed
+    side = json.loads((tmp_path / "out/2CylinderEngine.asset.json").read_text())
+    assert len(side["meshes"]) == 7 and len(side["materials"]) == 34
