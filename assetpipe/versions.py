@@ -24,8 +24,8 @@ LOD = 20  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         # 16: no mesh's share below 3/4 of its even share (lod_model.SHARE_KEEP)
         # 17: balance_meshes on by default, with a facing floor (no thin part folded flat below its even share)
         # 18: a balanced level whose curves stall above its budget gives every mesh its even share
-        # 20: meshes whose materials are equal in content (all but the name) are merged, as gltfpack does
         # 19: a candidate with moved vertices (meshoptimizer 1.3 simplifyWithUpdate, LodOptions.move_vertices): such levels get their own vertex rows
+        # 20: meshes whose materials are equal in content (all but the name) are merged, as gltfpack does
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
 ENCODE = 3  # 2: stats count duplicate triangles; positionOffset; 3: a scene that skips levels keeps only the rows its kept levels use
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

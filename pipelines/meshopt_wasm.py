@@ -51,12 +51,14 @@ MEMORY_LIMIT = 3 << 30
 
 
 class SimplifierFailed(RuntimeError):
-    """The WASM simplifier trapped or ran out of memory (the instance is dropped and remade)."""
+    """The WASM simplifier trapped (the instance is closed; the next call makes a new one) or
+    its heap could not grow for the call's arrays."""
 
 
 _lock = threading.Lock()
 _module = None  # (engine, module) compiled once per process
 _path_cache: list = []
+_version_cache: list = []
 # idle instances (store, exports, memory, sbrk): a call takes one (or makes one) and gives it
 # back, so there are never more than the calls running at once (a wasmtime store is used by one
 # thread at a time), whichever threads make them; each keeps the memory it grew to
@@ -102,7 +104,13 @@ def js_path() -> Path | None:
 
 def version() -> str | None:
     """The npm package's version (``"1.3.0"``), or None when it is not installed or wasmtime
-    is missing."""
+    is missing. Found once per process (the LOD step asks at every candidate)."""
+    if not _version_cache:
+        _version_cache.append(_find_version())
+    return _version_cache[0]
+
+
+def _find_version() -> str | None:
     p = js_path()
     if p is None:
         return None

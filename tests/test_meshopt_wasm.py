@@ -112,6 +112,7 @@ def test_a_missing_simplifier_is_named_when_levels_would_move(monkeypatch, tmp_p
     assert lod_move_note(LodOptions()) is None  # installed here
     monkeypatch.setenv("ASSETPIPE_MESHOPT_JS", str(tmp_path / "missing.js"))
     monkeypatch.setattr(meshopt_wasm, "_path_cache", [])  # looked up again under the variable
+    monkeypatch.setattr(meshopt_wasm, "_version_cache", [])
     assert meshopt_wasm.js_path() is None and meshopt_wasm.version() is None
     note = lod_move_note(LodOptions())
     assert note is not None and "meshoptimizer@1.3.0" in note and "ASSETPIPE_MESHOPT_JS" in note

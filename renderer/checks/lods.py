@@ -41,7 +41,7 @@ def mesh_diagonals(model) -> np.ndarray:
     return out
 
 
-def boundary_lengths(model, lod: int) -> np.ndarray:
+def boundary_lengths(model, lod: int, welds: list[np.ndarray] | None = None) -> np.ndarray:
     """(meshes,) length of each mesh's open edges (used by exactly one triangle) at LOD ``lod``.
 
     Vertices at one position (to float32 rounding, :func:`position_ids`) are one: a UV or
@@ -52,9 +52,13 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
     the mesh has under 65,536 vertices, else int64), so a million triangles take a sort of 3M
     integers. Meshes with the same indices and welding (placed copies of one mesh:
     MetalRoughSpheresNoTextures' 99 spheres) have the same open edges as index pairs: found once,
-    measured on each mesh's own positions.
+    measured on each mesh's own positions. ``welds``: :func:`mesh_welds` of the model, made once
+    for all its levels (None: made here).
     """
     import hashlib  # noqa: PLC0415
+
+    if welds is None:
+        welds = mesh_welds(model)
 
     total = np.zeros(len(model.meshes))
     found: dict[tuple[int, int, bytes], tuple[np.ndarray, np.ndarray]] = {}  # indices -> open edges (u, v)
@@ -66,8 +70,7 @@ def boundary_lengths(model, lod: int) -> np.ndarray:
         if not len(t):
             continue
         pos = model.positions[mesh.vertex_base:mesh.vertex_base + mesh.vertex_count]
-        ids = _welded(model, i, pos)
-        t = ids[t]
+        t = welds[i][t]
         key = (mesh.vertex_count, t.size, hashlib.blake2b(t.tobytes(), digest_size=20).digest())
         if key in found:
             u, v = found[key]
@@ -119,17 +122,9 @@ def position_ids(pos: np.ndarray) -> np.ndarray:
     return ids.astype(np.uint32) if n < 2**32 else ids
 
 
-_WELDS: dict = {}  # (id(model), mesh) -> (positions array, ids): one welding per mesh for all levels
-
-
-def _welded(model, i: int, pos: np.ndarray) -> np.ndarray:
-    got = _WELDS.get((id(model), i))
-    if got is None or got[0] is not model.positions:
-        if len(_WELDS) > 64:
-            _WELDS.clear()
-        got = (model.positions, position_ids(pos))
-        _WELDS[(id(model), i)] = got
-    return got[1]
+def mesh_welds(model) -> list[np.ndarray]:
+    """Per mesh, :func:`position_ids` of its vertex range (its levels' indices map through it)."""
+    return [position_ids(model.positions[m.vertex_base:m.vertex_base + m.vertex_count]) for m in model.meshes]
 
 
 def nearest_drawn(model, point: np.ndarray) -> np.ndarray | None:
@@ -217,7 +212,8 @@ class LodsCheck(Check):
         ppu = (options.lod_reference_px / 2) / math.tan(math.radians(options.lod_reference_fov_deg) / 2)
         with ctx.timer("compare"):
             diag = max(float(np.linalg.norm(model.bounds_max - model.bounds_min)), 1e-12)
-            open0 = boundary_lengths(model, 0)
+            welds = mesh_welds(model)  # one welding per mesh, for every level
+            open0 = boundary_lengths(model, 0, welds)
             mesh_diag = np.maximum(mesh_diagonals(model), 1e-12)
         # one view: a hole on the far side shows as open edges (above), and each view costs two renders
         # of the full LOD0 per level (4 s of lavapipe time for a 1M-triangle model under load)
@@ -263,7 +259,7 @@ class LodsCheck(Check):
                         fine_bad = max(fine_bad or 0.0, view_bad)
                 bad = max(bad, view_bad)
             with ctx.timer("compare"):
-                grown = boundary_lengths(model, k) - open0
+                grown = boundary_lengths(model, k, welds) - open0
                 growth = float(grown.sum()) / diag
                 if r.worst("openEdgeGrowth", growth, LOD_MAX_OPEN_EDGE_GROWTH):
                     r.messages.append(f"LOD{k}: its open edges are {growth:.3g} diagonals longer than LOD0's "
