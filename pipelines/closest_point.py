@@ -246,6 +246,52 @@ def _box2(px, py, pz, box, n):
     return d
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _nearest(px, py, pz, h, r, box, left, first, count, order, table, a, b, c, stack, sd):
+    """(squared distance, triangle) of the triangle nearest (px, py, pz) within radius r
+    (inf: none; (inf, -1) when nothing is within it); h: a triangle to try first (-1: none).
+    Ties go to the lowest triangle index, so the answer does not depend on the order boxes
+    are visited in."""
+    best = r * r if r < np.inf else np.inf
+    bf = -1
+    if h >= 0:
+        d2 = _dist2(px, py, pz, a, b, c, h)
+        if d2 <= best:
+            best, bf = d2, h
+    stack[0] = 0
+    sd[0] = _box2(px, py, pz, box, 0)
+    top = 1
+    while top > 0:
+        top -= 1
+        n = stack[top]
+        if sd[top] > best or (sd[top] == best and bf >= 0):
+            continue
+        l = left[n]
+        if l < 0:
+            for j in range(first[n], first[n] + count[n]):
+                d2 = _dist2_table(px, py, pz, table, j)
+                if d2 < best or (d2 == best and (bf < 0 or order[j] < bf)):
+                    best, bf = d2, order[j]
+            continue
+        d0 = _box2(px, py, pz, box, l)
+        d1 = _box2(px, py, pz, box, l + 1)
+        if d0 <= d1:
+            if d1 <= best:
+                stack[top], sd[top] = l + 1, d1
+                top += 1
+            if d0 <= best:
+                stack[top], sd[top] = l, d0
+                top += 1
+        else:
+            if d0 <= best:
+                stack[top], sd[top] = l, d0
+                top += 1
+            if d1 <= best:
+                stack[top], sd[top] = l + 1, d1
+                top += 1
+    return best, bf
+
+
 @njit(cache=True, nogil=True)
 def _query(p, hint, radius, box, left, first, count, order, table, a, b, c):
     k = p.shape[0]
@@ -254,50 +300,92 @@ def _query(p, hint, radius, box, left, first, count, order, table, a, b, c):
     stack = np.empty(_STACK, dtype=np.int64)
     sd = np.empty(_STACK)
     for i in range(k):
-        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        r = radius[i]
-        best = r * r if r < np.inf else np.inf
-        bf = -1
-        h = hint[i]
-        if h >= 0:
-            d2 = _dist2(px, py, pz, a, b, c, h)
-            if d2 <= best:
-                best, bf = d2, h
-        top = 0
-        stack[0] = 0
-        sd[0] = _box2(px, py, pz, box, 0)
-        top = 1
-        while top > 0:
-            top -= 1
-            n = stack[top]
-            if sd[top] > best or (sd[top] == best and bf >= 0):
-                continue
-            l = left[n]
-            if l < 0:
-                for j in range(first[n], first[n] + count[n]):
-                    d2 = _dist2_table(px, py, pz, table, j)
-                    if d2 < best or (d2 == best and (bf < 0 or order[j] < bf)):
-                        best, bf = d2, order[j]
-                continue
-            d0 = _box2(px, py, pz, box, l)
-            d1 = _box2(px, py, pz, box, l + 1)
-            if d0 <= d1:
-                if d1 <= best:
-                    stack[top], sd[top] = l + 1, d1
-                    top += 1
-                if d0 <= best:
-                    stack[top], sd[top] = l, d0
-                    top += 1
-            else:
-                if d0 <= best:
-                    stack[top], sd[top] = l, d0
-                    top += 1
-                if d1 <= best:
-                    stack[top], sd[top] = l + 1, d1
-                    top += 1
+        best, bf = _nearest(p[i, 0], p[i, 1], p[i, 2], hint[i], radius[i], box, left, first,
+                            count, order, table, a, b, c, stack, sd)
         out_d[i] = np.sqrt(best) if bf >= 0 else np.inf
         out_f[i] = bf
     return out_d, out_f
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _within(px, py, pz, r2, box, left, first, count, table, stack):
+    """The slot (in :func:`_table`) of some triangle within squared distance r2 of
+    (px, py, pz), or -1: the first one found ends the walk (nearest box first)."""
+    if _box2(px, py, pz, box, 0) > r2:
+        return -1
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        n = stack[top]
+        l = left[n]
+        if l < 0:
+            for j in range(first[n], first[n] + count[n]):
+                if _dist2_table(px, py, pz, table, j) <= r2:
+                    return j
+            continue
+        d0 = _box2(px, py, pz, box, l)
+        d1 = _box2(px, py, pz, box, l + 1)
+        if d0 <= d1:
+            if d1 <= r2:
+                stack[top] = l + 1
+                top += 1
+            if d0 <= r2:
+                stack[top] = l
+                top += 1
+        else:
+            if d0 <= r2:
+                stack[top] = l
+                top += 1
+            if d1 <= r2:
+                stack[top] = l + 1
+                top += 1
+    return -1
+
+
+#: points the largest-distance walk first asks in full (spread over the points): their
+#: largest distance is the bar every other point is first tested against
+_MAX_SEEDS = 64
+
+
+@njit(cache=True, nogil=True)
+def _max_query(p, hint, stop2, box, left, first, count, order, table, a, b, c):
+    """The largest squared nearest distance of the points (exact: the largest of what
+    :func:`_query` gives them), and whether it stopped early because that exceeded stop2.
+
+    A point is asked in full only when no triangle lies within the largest distance found so
+    far (its hint triangle tried first): a point with one nearer cannot raise the maximum."""
+    k = p.shape[0]
+    stack = np.empty(_STACK, dtype=np.int64)
+    sd = np.empty(_STACK)
+    m2 = 0.0
+    last = -1  # the slot of the triangle the previous point found within (points come in
+    # spatial order: often within of the next one too)
+    step = max(1, k // _MAX_SEEDS)
+    for i in range(0, k, step):
+        d2, _ = _nearest(p[i, 0], p[i, 1], p[i, 2], hint[i], np.inf, box, left, first, count,
+                         order, table, a, b, c, stack, sd)
+        m2 = max(m2, d2)
+        if m2 > stop2:
+            return m2, True
+    for i in range(k):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        h = hint[i]
+        if h >= 0 and _dist2(px, py, pz, a, b, c, h) <= m2:
+            continue
+        if last >= 0 and _dist2_table(px, py, pz, table, last) <= m2:
+            continue
+        j = _within(px, py, pz, m2, box, left, first, count, table, stack)
+        if j >= 0:
+            last = j
+            continue
+        d2, _ = _nearest(px, py, pz, h, np.inf, box, left, first, count, order, table, a, b, c,
+                         stack, sd)
+        if d2 > m2:
+            m2 = d2
+            if m2 > stop2:
+                return m2, True
+    return m2, False
 
 
 @njit(cache=True, nogil=True)
@@ -393,3 +481,29 @@ class ClosestTriangles:
         out_d, out_f = np.empty_like(d), np.empty_like(f)
         out_d[o], out_f[o] = d, f
         return out_d, out_f
+
+    def max_distance(self, points: np.ndarray, hint: np.ndarray | None = None,
+                     stop: float = np.inf) -> tuple[float, bool]:
+        """(the largest distance from the points to their nearest triangles, stopped).
+
+        Bit for bit ``query(points)[0].max()`` when not stopped, without finding each point's
+        nearest triangle: a point with some triangle within the largest distance found so far
+        cannot raise it (nearly every point, after the first few). ``stop``: once the largest
+        distance found exceeds it, that distance (one evaluated, so at most the true largest)
+        is returned with ``stopped`` True. No points: (0.0, False)."""
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        n = p.shape[0]
+        if n == 0:
+            return 0.0, False
+        if not np.isfinite(p).all():
+            raise ValueError("closest-point query: non-finite points")
+        if self._tree is None:
+            return np.inf, np.inf > stop
+        h = np.full(n, -1, dtype=np.int64) if hint is None else \
+            np.ascontiguousarray(hint, dtype=np.int64)
+        if n >= _SORT_MIN:
+            o = spatial_order(p)
+            p, h = p[o], h[o]
+        stop2 = stop * stop if stop < np.inf else np.inf
+        m2, stopped = _max_query(p, h, stop2, *self._tree, self.a, self.b, self.c)
+        return float(np.sqrt(m2)), bool(stopped)

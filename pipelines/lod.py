@@ -392,7 +392,7 @@ class _Estimator:
 
         if self._engine is None:
             self._engine = self._side.engine if self._side is not None else _Engine(self.local, self.idx)
-        back, sizes, used_of, pos_of, moved_of = [], [], [], [], []
+        back, used_of, pos_of, moved_of = [], [], [], []
         for c in cands:
             tri = c[0]
             pos = self.positions(c[4])
@@ -406,17 +406,13 @@ class _Estimator:
             if c[4] is not None:
                 moved_of[-1] = np.any(pos != self.local, axis=1)
                 off |= used & moved_of[-1]
-            p = np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
-                                pos[self._subset(np.flatnonzero(off))]])
-            back.append(p)
-            sizes.append(p.shape[0])
-        d = self._engine.query(np.concatenate(back))[0]
-        bwd, start = [], 0
-        for k in sizes:
-            bwd.append(float(d[start:start + k].max()) if k else 0.0)
-            start += k
+            back.append(np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
+                                        pos[self._subset(np.flatnonzero(off))]]))
+        # the largest distance of each candidate's points (exact, without finding every
+        # point's nearest triangle: ClosestTriangles.max_distance)
+        bwd = [self._engine.tree.max_distance(p)[0] for p in back]
 
-        def forward(i: int) -> float:
+        def forward(i: int, stop: float = math.inf) -> float:
             gone = ~used_of[i] if moved_of[i] is None else ~used_of[i] | moved_of[i]
             removed = self._subset(np.flatnonzero(self.used & gone))
             pts = np.concatenate([self.samples, self.local[removed]])
@@ -425,7 +421,7 @@ class _Estimator:
             if eng is None:
                 eng = _Engine(pos_of[i], tri.astype(np.int64))
                 self._built[id(tri)] = (tri, eng)
-            return float(eng.query(pts)[0].max())
+            return eng.tree.max_distance(pts, stop=stop)[0]
 
         if lowest_of is None:
             return [max(forward(i), bwd[i]) for i in range(len(cands))]
@@ -437,7 +433,8 @@ class _Estimator:
         for i in sorted(lowest_of, key=lambda i: (bwd[i], i)):
             if bwd[i] > best:
                 continue
-            out[i] = max(forward(i), bwd[i])
+            # a forward half above ``best`` cannot win: it stops there (a lower value)
+            out[i] = max(forward(i, best), bwd[i])
             best = min(best, out[i])
         return out
 

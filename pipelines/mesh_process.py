@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from assetpipe.core.rows import position_ids
 from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
 from assetpipe.pipelines.model import MeshData
 from assetpipe.pipelines.tangents import mikktspace_tangents
@@ -327,8 +328,7 @@ def smooth_normals(pos: np.ndarray, tris: np.ndarray) -> np.ndarray:
     n = pos.shape[0]
     if tris.shape[0] == 0:
         return np.tile([0.0, 0.0, 1.0], (n, 1))
-    _, group = np.unique(pos, axis=0, return_inverse=True)
-    group = group.reshape(-1)
+    group = position_ids(pos)
     a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
     face = np.cross(b - a, c - a)  # length = 2 * area: area weighting for free
     acc = np.zeros((group.max() + 1, 3))

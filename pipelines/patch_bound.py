@@ -80,10 +80,16 @@ WHY_FOLDED = 6     # an edge over the cell has both triangles on one side (a fol
 
 
 @njit(cache=True, nogil=True)
-def _overlap(box, left, first, count, order, lo, hi, out, stack):
-    """Triangles whose box meets [lo, hi] into ``out``; their number, or -1 if more than
-    ``out`` holds."""
-    n = 0
+def _overlap(box, left, first, count, order, lo, hi, out, stack, p0, n, r, a, b, c):
+    """Triangles whose box meets [lo, hi] and that reach into the slab within ``r`` of the
+    plane through ``p0`` with unit normal ``n`` (a triangle wholly farther than ``r`` from the
+    cell's plane is farther than ``r`` from the cell: leaving it out of the patch can only
+    make the proof fail, never wrong), into ``out``; their number, or -1 if more than ``out``
+    holds."""
+    nx, ny, nz = n[0], n[1], n[2]
+    ax_, ay_, az_ = abs(nx), abs(ny), abs(nz)
+    off = nx * p0[0] + ny * p0[1] + nz * p0[2]
+    n_out = 0
     top = 1
     stack[0] = 0
     while top > 0:
@@ -92,20 +98,33 @@ def _overlap(box, left, first, count, order, lo, hi, out, stack):
         if (box[node, 0] > hi[0] or box[node, 1] > hi[1] or box[node, 2] > hi[2]
                 or box[node, 3] < lo[0] or box[node, 4] < lo[1] or box[node, 5] < lo[2]):
             continue
+        # the box's extent along n against the slab
+        s = nx * (box[node, 0] + box[node, 3]) * 0.5 + ny * (box[node, 1] + box[node, 4]) * 0.5 \
+            + nz * (box[node, 2] + box[node, 5]) * 0.5 - off
+        rb = (ax_ * (box[node, 3] - box[node, 0]) + ay_ * (box[node, 4] - box[node, 1])
+              + az_ * (box[node, 5] - box[node, 2])) * 0.5
+        if s - rb > r or s + rb < -r:
+            continue
         l = left[node]
         if l < 0:
             for j in range(first[node], first[node] + count[node]):
-                if n >= out.shape[0]:
+                f = order[j]
+                za = nx * a[f, 0] + ny * a[f, 1] + nz * a[f, 2] - off
+                zb = nx * b[f, 0] + ny * b[f, 1] + nz * b[f, 2] - off
+                zc = nx * c[f, 0] + ny * c[f, 1] + nz * c[f, 2] - off
+                if (za > r and zb > r and zc > r) or (za < -r and zb < -r and zc < -r):
+                    continue
+                if n_out >= out.shape[0]:
                     return -1
-                out[n] = order[j]
-                n += 1
+                out[n_out] = f
+                n_out += 1
             continue
         if top + 2 > stack.shape[0]:
             return -1
         stack[top] = l
         stack[top + 1] = l + 1
         top += 2
-    return n
+    return n_out
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -228,6 +247,7 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
     zmax = np.empty(PATCH_MAX)
     lo = np.empty(3)
     hi = np.empty(3)
+    nv = np.empty(3)
     tx = np.empty(3)
     ty = np.empty(3)
     ox = np.empty(12)
@@ -276,7 +296,8 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
         for q in range(3):
             lo[q] = min(v[i, 0, q], v[i, 1, q], v[i, 2, q]) - r
             hi[q] = max(v[i, 0, q], v[i, 1, q], v[i, 2, q]) + r
-        m = _overlap(box, left, first, count, order, lo, hi, sel, stack)
+        nv[0], nv[1], nv[2] = nx, ny, nz
+        m = _overlap(box, left, first, count, order, lo, hi, sel, stack, v[i, 0], nv, r, a, b, c)
         if m <= 0:
             why[i] = WHY_TOO_MANY if m < 0 else WHY_UNCOVERED
             continue

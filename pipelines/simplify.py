@@ -38,6 +38,8 @@ import math
 
 import numpy as np
 
+from assetpipe.core.rows import unique_rows
+
 SIMPLIFY_LOCK_BORDER = 1 << 0
 SIMPLIFY_SPARSE = 1 << 1
 SIMPLIFY_ERROR_ABSOLUTE = 1 << 2
@@ -283,7 +285,7 @@ def cleanup_triangles(indices: np.ndarray, positions: np.ndarray | None = None) 
     if kept.size == 0:
         return np.zeros((0, 3), np.uint32)
     key = np.sort(tri[kept], axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
+    first = unique_rows(key)[0]
     return np.ascontiguousarray(tri[kept[np.sort(first)]])
 
 

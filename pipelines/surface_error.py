@@ -50,6 +50,7 @@ from typing import Sequence
 
 import numpy as np
 
+from assetpipe.core.rows import position_ids
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     convex_bound, lipschitz_bound, pair_bound)
@@ -265,26 +266,25 @@ class _Side:
     positions: np.ndarray            # (N, 3) float64
     tri: np.ndarray                  # (M, 3) int64
     _engine: _Engine | None = None
-    _welded: tuple[np.ndarray, np.ndarray] | None = None
-    # (unique positions (U, 3), id of each position (N,)): shared by the sides of one vertex
-    # array (the levels measured against their reference: measure_levels)
-    _weld: tuple[np.ndarray, np.ndarray] | None = None
+    _welded: np.ndarray | None = None
+    # the id of each vertex's position (N,): shared by the sides of one vertex array (the
+    # levels measured against their reference: measure_levels)
+    _weld: np.ndarray | None = None
 
     @property
-    def weld(self) -> tuple[np.ndarray, np.ndarray]:
-        """(unique positions (U, 3), (N,) int64 id of each vertex's position among them)."""
+    def weld(self) -> np.ndarray:
+        """(N,) int64: one id per distinct position (equal ids: equal positions)."""
         if self._weld is None:
-            uniq, inv = np.unique(self.positions, axis=0, return_inverse=True)
-            self._weld = (uniq, inv.reshape(-1))
+            self._weld = position_ids(self.positions)
         return self._weld
 
     @property
-    def welded(self) -> tuple[np.ndarray, np.ndarray]:
-        """(positions, tri) with vertices at identical positions merged: UV/normal seams
-        split vertices, but two triangles across a seam still share an edge."""
+    def welded_tri(self) -> np.ndarray:
+        """(M, 3) int64: the triangles over :attr:`weld`'s ids (vertices at identical
+        positions merged): UV/normal seams split vertices, but two triangles across a seam
+        still share an edge."""
         if self._welded is None:
-            uniq, ids = self.weld
-            self._welded = (uniq, ids[self.tri])
+            self._welded = self.weld[self.tri]
         return self._welded
 
     @property
@@ -345,7 +345,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             break
         if PAIR_FIRST:
             ub = np.minimum(ub, pair_bound(v, hint, np.ascontiguousarray(f), eng.a, eng.b, eng.c,
-                                           target.welded[1]))
+                                           target.welded_tri))
             settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
             if not v.shape[0]:
                 break
@@ -353,7 +353,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # only triangles within thr of the cell can settle it, so the patch is gathered there
         if PATCH_BOUND and eng.tree.nodes is not None and retry.any():
             val, why = patch_bound(v, np.where(retry, thr, np.inf), *eng.tree.nodes, eng.a,
-                                   eng.b, eng.c, target.welded[1])
+                                   eng.b, eng.c, target.welded_tri)
             retry &= (why == WHY_BOUNDED) | (why == WHY_TOO_MANY)
             ub = np.minimum(ub, val)
             settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
@@ -381,7 +381,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # between them and bound each side by its own triangle
         if v.shape[0]:
             others = np.ascontiguousarray(np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1))
-            ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded[1]))
+            ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded_tri))
             settled, ub, v, d, f, hint, fc, retry = _settle(ub, thr, settled, v, d, f, hint, fc, retry)
         k = v.shape[0]
         if not k:

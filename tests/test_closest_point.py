@@ -128,3 +128,37 @@ def test_non_finite_input_is_refused():
     ct = ClosestTriangles.build(np.eye(3), [[0, 1, 2]])
     with pytest.raises(ValueError, match="non-finite points"):
         ct.query(np.array([[0.0, np.inf, 0.0]]))
+
+
+@pytest.mark.parametrize("m,slivers", [(1, 0.0), (300, 0.0), (300, 0.5), (2000, 0.1)])
+def test_max_distance_is_the_largest_query_answer_bit_for_bit(m, slivers):
+    rng = np.random.default_rng(40 + m)
+    pos, tri = _soup(rng, m, slivers)
+    ct = ClosestTriangles.build(pos, tri)
+    for n in (1, 5, 63, 64, 3000):  # below and above the size sorted spatially, and the seeds
+        pts = rng.normal(scale=1.5, size=(n, 3))
+        want = ct.query(pts)[0].max()
+        got, stopped = ct.max_distance(pts)
+        assert got == want and not stopped
+        # a hint (any triangle) changes nothing
+        got, _ = ct.max_distance(pts, hint=rng.integers(0, tri.shape[0], n))
+        assert got == want
+
+
+def test_max_distance_stops_above_the_bar_with_a_distance_it_evaluated():
+    rng = np.random.default_rng(41)
+    pos, tri = _soup(rng, 400)
+    ct = ClosestTriangles.build(pos, tri)
+    pts = rng.normal(scale=1.5, size=(2000, 3))
+    d = ct.query(pts)[0]
+    bar = float(np.median(d))
+    got, stopped = ct.max_distance(pts, stop=bar)
+    assert stopped and bar < got <= d.max() and got in set(d.tolist())
+    # a bar at the answer itself is not exceeded: the exact answer
+    assert ct.max_distance(pts, stop=float(d.max())) == (d.max(), False)
+
+
+def test_max_distance_of_no_points_and_of_an_empty_mesh():
+    assert ClosestTriangles.build(np.eye(3), [[0, 1, 2]]).max_distance(np.zeros((0, 3))) == (0.0, False)
+    empty = ClosestTriangles.build(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    assert empty.max_distance(np.ones((2, 3)))[0] == np.inf
