@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from assetpipe.core.rows import column_bounds
+
 FORMAT_VERSION = 1
 SEED_MODEL_KEYS = ("id", "meshes", "idxFilename", "vtxFilename")
 SEED_MESH_KEYS = ("id", "materialId", "idxOffset", "idxSize", "vtxOffset", "vtxSize")
@@ -70,7 +72,7 @@ def bounds_of(positions: np.ndarray) -> dict:
         z = [0.0, 0.0, 0.0]
         return {"min": z, "max": z, "center": z, "radius": 0.0}
     p = positions.astype(np.float64)
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = column_bounds(p)
     c = (lo + hi) * 0.5
     r = float(np.sqrt(np.max(np.einsum("ij,ij->i", p - c, p - c))))
     return {"min": [_num(v) for v in lo], "max": [_num(v) for v in hi],

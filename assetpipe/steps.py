@@ -20,6 +20,7 @@ import numpy as np
 
 from assetpipe import __version__
 from assetpipe.core.errors import AssetError
+from assetpipe.core.rows import column_bounds
 from assetpipe.cache.serialize import pack, unpack
 from assetpipe.cache.store import Store
 
@@ -108,7 +109,7 @@ def task_import(store_root: str, source: str, budgets: dict | None = None) -> di
     blobs["geometry"] = store.put_blob(pack({"meshes": meshes}, arrays))
     if model.meshes:
         pos = np.vstack([m.positions for m in model.meshes])
-        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        lo, hi = column_bounds(pos) if pos.size else (np.zeros(3), np.zeros(3))
         radius = float(np.sqrt(np.max(np.sum((pos - (lo + hi) / 2) ** 2, axis=1)))) if pos.size else 0.0
         center = ((lo + hi) / 2).tolist() if pos.size else [0.0, 0.0, 0.0]
     else:

@@ -38,6 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
+from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines import meshopt_wasm
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
@@ -154,8 +155,8 @@ def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOpti
         u = np.asarray(uv, dtype=np.float64).reshape(n, 2)
         u = np.where(np.isfinite(u), u, 0.0)
         if n:
-            lo = u.min(axis=0)
-            extent = float((u.max(axis=0) - lo).max())
+            lo, hi = column_bounds(u)
+            extent = float((hi - lo).max())
             u = (u - lo) / extent if extent > 0 else u - lo
         cols.append(u.astype(np.float32))
         weights += [opts.uv_weight] * 2

@@ -31,6 +31,7 @@ from typing import Hashable, Sequence
 
 import numpy as np
 
+from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
@@ -141,7 +142,8 @@ def _affine_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float] | 
     if rank < 3:
         return None
     resid = float(np.sqrt(np.max(np.sum((a @ sol - b) ** 2, axis=1))))
-    size = float(np.linalg.norm(dst.max(axis=0) - dst.min(axis=0)))
+    lo, hi = column_bounds(dst)
+    size = float(np.linalg.norm(hi - lo))
     # float32 vertex data: positions carry ~6e-8 relative rounding; allow a few ulps of it
     if not (size > 0 and resid <= 1e-5 * size and np.all(np.isfinite(sol))):
         return None
@@ -513,8 +515,11 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
         else:
             j, lin, resid, mirrored = copy
             sigma = float(np.linalg.svd(lin, compute_uv=False)[0])
-            used = pos[np.unique(idx.reshape(-1))] if idx.size else pos[:0]
-            diag = float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))) if used.size else 0.0
+            mask = np.zeros(pos.shape[0], bool)
+            mask[idx.reshape(-1)] = True
+            used = pos[mask]
+            lo, hi = column_bounds(used) if used.size else (np.zeros(3), np.zeros(3))
+            diag = float(np.linalg.norm(hi - lo))
             levels = _scaled_levels(source_levels[j], sigma, resid, diag, options, mirrored)
             # a moved level's vertices through the same map: copy(x) = lin x + t, so
             # copy(moved) = copy(original) + lin (moved - original), within the fit's residual

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from assetpipe.core.rows import position_ids
+from assetpipe.core.rows import column_bounds, position_ids
 from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS, DEFAULT_MESH_OPTIONS, MeshOptions
 from assetpipe.pipelines.model import MeshData
 from assetpipe.pipelines.tangents import mikktspace_tangents
@@ -178,7 +178,7 @@ def float32_resolution(pos32: np.ndarray) -> tuple[float, float]:
     if pos32.shape[0] == 0:
         return 0.0, 0.0
     p = np.asarray(pos32, dtype=np.float64)
-    lo, hi = p.min(axis=0), p.max(axis=0)
+    lo, hi = column_bounds(p)
     diag = float(np.sqrt(np.sum((hi - lo) ** 2)))
     step = float(np.spacing(np.float32(np.max(np.maximum(np.abs(lo), np.abs(hi))))))
     return step, diag
@@ -271,7 +271,7 @@ def _zero_area(pos: np.ndarray, tris: np.ndarray, tolerance: float) -> np.ndarra
     mask = np.zeros(pos.shape[0], dtype=bool)
     mask[tris.reshape(-1)] = True
     used = pos[mask]  # the referenced vertices: the size of what is drawn
-    lo, hi = used.min(axis=0), used.max(axis=0)
+    lo, hi = column_bounds(used)
     local = pos - (lo + hi) * 0.5
     diag2 = float(np.sum((hi - lo) ** 2))
     a, b, c = local[tris[:, 0]], local[tris[:, 1]], local[tris[:, 2]]

@@ -301,6 +301,10 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
         if m <= 0:
             why[i] = WHY_TOO_MANY if m < 0 else WHY_UNCOVERED
             continue
+        # T's projected box, shrunk by margin: a triangle whose box misses it reaches into T
+        # by less than margin (and leaving a triangle out is never wrong)
+        txl, txh = min(0.0, tx[2]) + margin, max(l1, tx[2]) - margin
+        tyl, tyh = min(0.0, ty[2]) + margin, max(0.0, ty[2]) - margin
         # project; each triangle reaching into T (deeper than margin): the sign of its
         # projected area, the area of its projection clipped by T, its largest height there
         area_pos = 0.0
@@ -320,8 +324,16 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
             ar = _orient(fx[j, 0], fy[j, 0], fx[j, 1], fy[j, 1], fx[j, 2], fy[j, 2])
             far_[j] = ar
             side[j] = 0
-            if not abs(ar) > margin2 or _separated(fx[j], fy[j], 3, tx, ty, -margin):
-                continue  # seen edge-on (no area), or not reaching into T
+            if not abs(ar) > margin2:
+                continue  # seen edge-on (no area)
+            # not reaching into T: first by the boxes of the projections (a gap between them
+            # is a gap between the shapes), then exactly
+            if (min(fx[j, 0], fx[j, 1], fx[j, 2]) > txh or max(fx[j, 0], fx[j, 1], fx[j, 2]) < txl
+                    or min(fy[j, 0], fy[j, 1], fy[j, 2]) > tyh
+                    or max(fy[j, 0], fy[j, 1], fy[j, 2]) < tyl):
+                continue
+            if _separated(fx[j], fy[j], 3, tx, ty, -margin):
+                continue
             mc = _clip(fx[j], fy[j], tx, ty, ox, oy, bx, by)
             if mc == 0:
                 continue

@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from assetpipe.core.rows import unique_rows
+from assetpipe.core.rows import column_bounds, unique_rows
 
 SIMPLIFY_LOCK_BORDER = 1 << 0
 SIMPLIFY_SPARSE = 1 << 1
@@ -113,7 +113,8 @@ def _extent_and_diagonal(pos: np.ndarray) -> tuple[float, float]:
     errors."""
     if pos.shape[0] == 0:
         return 0.0, 0.0
-    size = pos.max(axis=0).astype(np.float64) - pos.min(axis=0)
+    lo, hi = column_bounds(pos)
+    size = hi.astype(np.float64) - lo
     size = np.where(np.isfinite(size), size, 0.0)
     return float(size.max()), float(np.linalg.norm(size))
 

@@ -50,7 +50,7 @@ from typing import Sequence
 
 import numpy as np
 
-from assetpipe.core.rows import position_ids
+from assetpipe.core.rows import column_bounds, position_ids
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     convex_bound, lipschitz_bound, pair_bound)
@@ -132,7 +132,7 @@ def local_frame(positions: np.ndarray, indices: np.ndarray | None = None) -> tup
         pos = pos[_used_mask(indices, pos.shape[0])]
     if pos.shape[0] == 0:
         return np.zeros(3), 0.0
-    lo, hi = pos.min(axis=0), pos.max(axis=0)
+    lo, hi = column_bounds(pos)
     return (lo + hi) * 0.5, float(np.linalg.norm(hi - lo))
 
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from assetpipe.core.rows import position_ids, unique_rows
+from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 
 
 def test_unique_rows_matches_numpy():
@@ -25,3 +25,15 @@ def test_position_ids_group_equal_positions_and_only_those():
     ids = position_ids(pos)
     same = (pos[:, None, :] == pos[None, :, :]).all(axis=2)
     np.testing.assert_array_equal(ids[:, None] == ids[None, :], same)
+
+
+def test_column_bounds_equal_numpy_min_max():
+    rng = np.random.default_rng(2)
+    for dtype in (np.float32, np.float64, np.int64):
+        rows = (rng.normal(size=(1000, 3)) * 100).astype(dtype)
+        lo, hi = column_bounds(rows)
+        assert lo.dtype == rows.dtype and hi.dtype == rows.dtype
+        np.testing.assert_array_equal(lo, rows.min(axis=0))
+        np.testing.assert_array_equal(hi, rows.max(axis=0))
+    one = np.array([[np.nan, 1.0]])  # NaN propagates as numpy's does
+    np.testing.assert_array_equal(column_bounds(one)[0], one.min(axis=0))

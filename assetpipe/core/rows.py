@@ -1,8 +1,12 @@
-"""Distinct rows of small integer or float arrays, by one lexsort.
+"""Helpers for (R, k) row arrays (positions, index triples) where numpy's own is slow.
 
-``np.unique(axis=0)`` sorts a structured view field by field; a lexsort over the columns does
-the same work 2-10x faster (80k float rows: 64 ms against 25 ms here). Array contracts: rows
-``(R, k)``; results int64.
+* Distinct rows by one lexsort: ``np.unique(axis=0)`` sorts a structured view field by field;
+  a lexsort over the columns does the same work 2-10x faster (80k float rows: 64 ms against
+  25 ms here).
+* Column bounds: numpy 2.4's ``a.min(axis=0)`` over (N, 3) rows takes 1.7 ms for 50k rows
+  here, one reduction per column 0.09 ms (the same values: min and max are exact).
+
+Array contracts: rows ``(R, k)``; ids int64.
 """
 
 from __future__ import annotations
@@ -33,3 +37,12 @@ def position_ids(positions: np.ndarray) -> np.ndarray:
     it; rows must be free of NaN, which equals nothing)."""
     p = np.ascontiguousarray(np.asarray(positions, np.float64) + 0.0)  # + 0.0: -0.0 -> 0.0
     return unique_rows(p.view(np.int64).reshape(p.shape[0], -1))[1]
+
+
+def column_bounds(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(per-column minimum (k,), per-column maximum (k,)) of (R, k) rows, R >= 1, in their
+    dtype: ``(rows.min(axis=0), rows.max(axis=0))`` exactly (NaN propagates alike)."""
+    a = np.asarray(rows)
+    lo = np.array([a[:, j].min() for j in range(a.shape[1])], dtype=a.dtype)
+    hi = np.array([a[:, j].max() for j in range(a.shape[1])], dtype=a.dtype)
+    return lo, hi
