@@ -46,51 +46,58 @@ def _area(lx, ly, lz, hx, hy, hz):
 
 
 @njit(cache=True, nogil=True)
-def _sah_split(order, s, e, cen, lo, hi, cl, ch, ax_out):
+def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch, dscratch):
     """Best binned-SAH plane over the three axes: returns the split position in
-    ``order[s:e]`` after partitioning it (0 if no plane beats a median split's caller)."""
+    ``order[s:e]`` (and the rows ``d[s:e]`` with it) after partitioning it (0 if no plane
+    beats a median split's caller). ``d`` (M, 9): per slot, the triangle's centroid, box low
+    and box high (kept in slot order: the passes read memory in sequence). ``cnt`` (3, B)
+    int64, ``blo``/``bhi`` (3, B, 3), ``rarea`` (B,), ``rcnt`` (B,) int64, ``scratch`` (M,)
+    int64 and ``dscratch`` (M, 9): work space, overwritten. One pass bins the triangles on all
+    three axes; one pass partitions (stable: each side keeps its order)."""
     best_cost = np.inf
     best_ax = -1
     best_bin = -1
-    cnt = np.zeros(_BINS, dtype=np.int64)
-    blo = np.empty((_BINS, 3))
-    bhi = np.empty((_BINS, 3))
-    rarea = np.empty(_BINS)
-    rcnt = np.empty(_BINS, dtype=np.int64)
+    scale = np.zeros(3)
     for ax in range(3):
         ext = ch[ax] - cl[ax]
-        if not ext > 0.0:
-            continue
-        scale = _BINS / ext
-        cnt[:] = 0
-        blo[:, :] = np.inf
-        bhi[:, :] = -np.inf
-        for i in range(s, e):
-            t = order[i]
-            bi = min(int((cen[t, ax] - cl[ax]) * scale), _BINS - 1)
-            cnt[bi] += 1
+        if ext > 0.0:
+            scale[ax] = _BINS / ext
+        for j in range(_BINS):
+            cnt[ax, j] = 0
             for k in range(3):
-                blo[bi, k] = min(blo[bi, k], lo[t, k])
-                bhi[bi, k] = max(bhi[bi, k], hi[t, k])
+                blo[ax, j, k] = np.inf
+                bhi[ax, j, k] = -np.inf
+    for i in range(s, e):
+        for ax in range(3):
+            if scale[ax] == 0.0:
+                continue
+            bi = min(int((d[i, ax] - cl[ax]) * scale[ax]), _BINS - 1)
+            cnt[ax, bi] += 1
+            for k in range(3):
+                blo[ax, bi, k] = min(blo[ax, bi, k], d[i, 3 + k])
+                bhi[ax, bi, k] = max(bhi[ax, bi, k], d[i, 6 + k])
+    for ax in range(3):
+        if scale[ax] == 0.0:
+            continue
         # sweep from the right: area and count of bins > j
         lx = ly = lz = np.inf
         hx = hy = hz = -np.inf
         n = 0
         for j in range(_BINS - 1, 0, -1):
-            if cnt[j]:
-                lx, ly, lz = min(lx, blo[j, 0]), min(ly, blo[j, 1]), min(lz, blo[j, 2])
-                hx, hy, hz = max(hx, bhi[j, 0]), max(hy, bhi[j, 1]), max(hz, bhi[j, 2])
-            n += cnt[j]
+            if cnt[ax, j]:
+                lx, ly, lz = min(lx, blo[ax, j, 0]), min(ly, blo[ax, j, 1]), min(lz, blo[ax, j, 2])
+                hx, hy, hz = max(hx, bhi[ax, j, 0]), max(hy, bhi[ax, j, 1]), max(hz, bhi[ax, j, 2])
+            n += cnt[ax, j]
             rarea[j - 1] = _area(lx, ly, lz, hx, hy, hz) if n else 0.0
             rcnt[j - 1] = n
         lx = ly = lz = np.inf
         hx = hy = hz = -np.inf
         n = 0
         for j in range(_BINS - 1):
-            if cnt[j]:
-                lx, ly, lz = min(lx, blo[j, 0]), min(ly, blo[j, 1]), min(lz, blo[j, 2])
-                hx, hy, hz = max(hx, bhi[j, 0]), max(hy, bhi[j, 1]), max(hz, bhi[j, 2])
-            n += cnt[j]
+            if cnt[ax, j]:
+                lx, ly, lz = min(lx, blo[ax, j, 0]), min(ly, blo[ax, j, 1]), min(lz, blo[ax, j, 2])
+                hx, hy, hz = max(hx, bhi[ax, j, 0]), max(hy, bhi[ax, j, 1]), max(hz, bhi[ax, j, 2])
+            n += cnt[ax, j]
             if n == 0 or rcnt[j] == 0:
                 continue
             cost = _area(lx, ly, lz, hx, hy, hz) * n + rarea[j] * rcnt[j]
@@ -99,34 +106,36 @@ def _sah_split(order, s, e, cen, lo, hi, cl, ch, ax_out):
     if best_ax < 0:
         return 0
     ax_out[0] = best_ax
-    scale = _BINS / (ch[best_ax] - cl[best_ax])
-    # stable partition: bins <= best_bin first
-    tmp = order[s:e].copy()
+    sc = scale[best_ax]
+    # stable partition: bins <= best_bin first, in order; the others after them, in order
     w = s
-    for i in range(tmp.shape[0]):
-        t = tmp[i]
-        if min(int((cen[t, best_ax] - cl[best_ax]) * scale), _BINS - 1) <= best_bin:
-            order[w] = t
+    r = 0
+    for i in range(s, e):
+        if min(int((d[i, best_ax] - cl[best_ax]) * sc), _BINS - 1) <= best_bin:
+            order[w] = order[i]
+            for k in range(9):
+                d[w, k] = d[i, k]
             w += 1
-    for i in range(tmp.shape[0]):
-        t = tmp[i]
-        if min(int((cen[t, best_ax] - cl[best_ax]) * scale), _BINS - 1) > best_bin:
-            order[w] = t
-            w += 1
-    mid = s
-    for i in range(tmp.shape[0]):
-        t = tmp[i]
-        if min(int((cen[t, best_ax] - cl[best_ax]) * scale), _BINS - 1) <= best_bin:
-            mid += 1
-    return mid
+        else:
+            scratch[r] = order[i]
+            for k in range(9):
+                dscratch[r, k] = d[i, k]
+            r += 1
+    for i in range(r):
+        order[w + i] = scratch[i]
+        for k in range(9):
+            d[w + i, k] = dscratch[i, k]
+    return w
 
 
 @njit(cache=True, nogil=True)
 def _build(a, b, c, leaf):
     m = a.shape[0]
-    cen = (a + b + c) / 3.0
-    lo = np.minimum(np.minimum(a, b), c)
-    hi = np.maximum(np.maximum(a, b), c)
+    # per slot (permuted along with ``order``): centroid, box low, box high
+    d = np.empty((m, 9))
+    d[:, 0:3] = (a + b + c) / 3.0
+    d[:, 3:6] = np.minimum(np.minimum(a, b), c)
+    d[:, 6:9] = np.maximum(np.maximum(a, b), c)
     order = np.arange(m)
     cap = 2 * m + 1  # a binary tree with at least one triangle a leaf has < 2m nodes
     nlo = np.empty((cap, 3))
@@ -139,6 +148,13 @@ def _build(a, b, c, leaf):
     se = np.empty(_STACK * 2, dtype=np.int64)
     sdp = np.empty(_STACK * 2, dtype=np.int64)
     ax_out = np.zeros(1, dtype=np.int64)
+    cnt = np.zeros((3, _BINS), dtype=np.int64)  # the SAH split's work space
+    blo = np.empty((3, _BINS, 3))
+    bhi = np.empty((3, _BINS, 3))
+    rarea = np.empty(_BINS)
+    rcnt = np.empty(_BINS, dtype=np.int64)
+    scratch = np.empty(m, dtype=np.int64)
+    dscratch = np.empty((m, 9))
     sn[0], ss[0], se[0], sdp[0] = 0, 0, m, 0
     top = 1
     used = 1
@@ -154,12 +170,11 @@ def _build(a, b, c, leaf):
         cl[:] = np.inf
         ch[:] = -np.inf
         for i in range(s, e):
-            t = order[i]
             for k in range(3):
-                bl[k] = min(bl[k], lo[t, k])
-                bh[k] = max(bh[k], hi[t, k])
-                cl[k] = min(cl[k], cen[t, k])
-                ch[k] = max(ch[k], cen[t, k])
+                bl[k] = min(bl[k], d[i, 3 + k])
+                bh[k] = max(bh[k], d[i, 6 + k])
+                cl[k] = min(cl[k], d[i, k])
+                ch[k] = max(ch[k], d[i, k])
         for k in range(3):
             nlo[node, k] = bl[k]
             nhi[node, k] = bh[k]
@@ -167,7 +182,8 @@ def _build(a, b, c, leaf):
             first[node] = s
             count[node] = e - s
             continue
-        mid = _sah_split(order, s, e, cen, lo, hi, cl, ch, ax_out) if depth < _SAH_DEPTH else 0
+        mid = _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch,
+                         dscratch) if depth < _SAH_DEPTH else 0
         if mid <= s or mid >= e:
             # no SAH plane (all centroids in one bin) or too deep: the median of the longest
             # centroid extent (stable sort: the same tree on every machine)
@@ -177,9 +193,9 @@ def _build(a, b, c, leaf):
                 if ch[k] - cl[k] > ext:
                     ax, ext = k, ch[k] - cl[k]
             mid = (s + e) // 2
-            keys = cen[order[s:e], ax]
-            perm = np.argsort(keys, kind="mergesort")
+            perm = np.argsort(d[s:e, ax], kind="mergesort")
             order[s:e] = order[s:e][perm]
+            d[s:e] = d[s:e][perm]
         left[node] = used
         sn[top], ss[top], se[top], sdp[top] = used, s, mid, depth + 1
         sn[top + 1], ss[top + 1], se[top + 1], sdp[top + 1] = used + 1, mid, e, depth + 1
