@@ -367,9 +367,10 @@ _MAX_SEEDS = 64
 
 
 @njit(cache=True, nogil=True)
-def _max_query(p, hint, stop2, box, left, first, count, order, table, a, b, c):
+def _max_query(p, hint, stop, box, left, first, count, order, table, a, b, c):
     """The largest squared nearest distance of the points (exact: the largest of what
-    :func:`_query` gives them), and whether it stopped early because that exceeded stop2.
+    :func:`_query` gives them), and whether it stopped early because its square root
+    exceeded ``stop`` (compared after the root, which rounds: a stopped value is > stop).
 
     A point is asked in full only when no triangle lies within the largest distance found so
     far (its hint triangle tried first): a point with one nearer cannot raise the maximum."""
@@ -384,7 +385,7 @@ def _max_query(p, hint, stop2, box, left, first, count, order, table, a, b, c):
         d2, _ = _nearest(p[i, 0], p[i, 1], p[i, 2], hint[i], np.inf, box, left, first, count,
                          order, table, a, b, c, stack, sd)
         m2 = max(m2, d2)
-        if m2 > stop2:
+        if np.sqrt(m2) > stop:
             return m2, True
     for i in range(k):
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
@@ -401,7 +402,7 @@ def _max_query(p, hint, stop2, box, left, first, count, order, table, a, b, c):
                          stack, sd)
         if d2 > m2:
             m2 = d2
-            if m2 > stop2:
+            if np.sqrt(m2) > stop:
                 return m2, True
     return m2, False
 
@@ -522,6 +523,5 @@ class ClosestTriangles:
         if n >= _SORT_MIN:
             o = spatial_order(p)
             p, h = p[o], h[o]
-        stop2 = stop * stop if stop < np.inf else np.inf
-        m2, stopped = _max_query(p, h, stop2, *self._tree, self.a, self.b, self.c)
+        m2, stopped = _max_query(p, h, float(stop), *self._tree, self.a, self.b, self.c)
         return float(np.sqrt(m2)), bool(stopped)

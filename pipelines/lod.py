@@ -385,57 +385,62 @@ class _Estimator:
 
     def __call__(self, cands: list[_Candidate], lowest_of: Sequence[int] | None = None) -> list[float]:
         """The estimate of every candidate. ``lowest_of``: only the lowest estimate among these
-        candidates is wanted (the others may get a lower value: the backward half alone); the
-        candidate with the lowest value and that value are the same as without it."""
+        candidates is wanted: the candidate with the lowest value and that value are the same
+        as without it, every other one of them gets a lower value above it (its evaluation
+        stops there), and candidates not among them get NaN (not estimated)."""
         if not cands:
             return []
         from assetpipe.pipelines.surface_error import _Engine
 
         if self._engine is None:
             self._engine = self._side.engine if self._side is not None else _Engine(self.local, self.idx)
-        back, used_of, pos_of, moved_of = [], [], [], []
-        for c in cands:
-            tri = c[0]
-            pos = self.positions(c[4])
-            pos_of.append(pos)
+
+        def backward(i: int, stop: float = math.inf) -> tuple[float, np.ndarray, np.ndarray | None]:
+            """(the largest distance of candidate i's points to level 0, exact unless above
+            ``stop``; its used vertices; its moved vertices or None)."""
+            c = cands[i]
+            tri, pos = c[0], self.positions(c[4])
             used = np.zeros(self.local.shape[0], bool)
             used[tri.reshape(-1)] = True
-            used_of.append(used)
             # vertices shared with level 0 (and not moved) are on it (distance 0): only the others
             off = used & ~self.used
-            moved_of.append(None)
+            moved = None
             if c[4] is not None:
-                moved_of[-1] = np.any(pos != self.local, axis=1)
-                off |= used & moved_of[-1]
-            back.append(np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
-                                        pos[self._subset(np.flatnonzero(off))]]))
-        # the largest distance of each candidate's points (exact, without finding every
-        # point's nearest triangle: ClosestTriangles.max_distance)
-        bwd = [self._engine.tree.max_distance(p)[0] for p in back]
+                moved = np.any(pos != self.local, axis=1)
+                off |= used & moved
+            pts = np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
+                                  pos[self._subset(np.flatnonzero(off))]])
+            # exact, without finding every point's nearest triangle (max_distance)
+            return self._engine.tree.max_distance(pts, stop=stop)[0], used, moved
 
-        def forward(i: int, stop: float = math.inf) -> float:
-            gone = ~used_of[i] if moved_of[i] is None else ~used_of[i] | moved_of[i]
+        def forward(i: int, used: np.ndarray, moved: np.ndarray | None, stop: float = math.inf) -> float:
+            gone = ~used if moved is None else ~used | moved
             removed = self._subset(np.flatnonzero(self.used & gone))
             pts = np.concatenate([self.samples, self.local[removed]])
             tri = cands[i][0]
             eng = self.engine_for(tri)
             if eng is None:
-                eng = _Engine(pos_of[i], tri.astype(np.int64))
+                eng = _Engine(self.positions(cands[i][4]), tri.astype(np.int64))
                 self._built[id(tri)] = (tri, eng)
             return eng.tree.max_distance(pts, stop=stop)[0]
 
         if lowest_of is None:
-            return [max(forward(i), bwd[i]) for i in range(len(cands))]
-        # the forward half (a BVH of the candidate and the level-0 samples) only where the
-        # backward half does not already exceed the lowest estimate found: a candidate whose
-        # lower value is above it cannot be the lowest (ties are computed: > only)
-        out = list(bwd)
+            out = []
+            for i in range(len(cands)):
+                b, used, moved = backward(i)
+                out.append(max(forward(i, used, moved), b))
+            return out
+        # candidates in order of the simplifier's own error (the likely winner first, so that
+        # the others stop early): each half stops once above the lowest estimate so far, which
+        # a candidate then cannot beat (ties are computed: > only)
+        out = [math.nan] * len(cands)
         best = math.inf
-        for i in sorted(lowest_of, key=lambda i: (bwd[i], i)):
-            if bwd[i] > best:
+        for i in sorted(lowest_of, key=lambda i: (cands[i][1], i)):
+            b, used, moved = backward(i, best)
+            out[i] = b
+            if b > best:
                 continue
-            # a forward half above ``best`` cannot win: it stops there (a lower value)
-            out[i] = max(forward(i, best), bwd[i])
+            out[i] = max(forward(i, used, moved, best), b)
             best = min(best, out[i])
         return out
 

@@ -156,6 +156,11 @@ def test_max_distance_stops_above_the_bar_with_a_distance_it_evaluated():
     assert stopped and bar < got <= d.max() and got in set(d.tolist())
     # a bar at the answer itself is not exceeded: the exact answer
     assert ct.max_distance(pts, stop=float(d.max())) == (d.max(), False)
+    # bars at and one float below distances: a stopped value is above the bar after its root
+    # (a squared comparison rounds: it let a value equal to the bar through)
+    for bar in np.concatenate([np.nextafter(np.sort(d)[-50:-1], -np.inf), np.sort(d)[-400:-1]]):
+        got, stopped = ct.max_distance(pts, stop=float(bar))
+        assert stopped and got > bar
 
 
 def test_max_distance_of_no_points_and_of_an_empty_mesh():

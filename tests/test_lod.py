@@ -376,9 +376,9 @@ def test_lock_fraction_validated():
 
 
 def test_estimator_lowest_of_keeps_the_lowest_candidate_and_its_value():
-    """Asked only for the lowest estimate among some candidates, the estimator skips the forward
-    half where the backward half alone already exceeds the lowest found: the same candidate
-    comes out lowest, with the same value; the others get at most their full value."""
+    """Asked only for the lowest estimate among some candidates, the estimator stops each one's
+    halves once above the lowest found: the same candidate comes out lowest, with the same
+    value; the others get a value above it and at most their full value."""
     from assetpipe.pipelines import simplify as simp
     from assetpipe.pipelines.lod import _Estimator
 
@@ -412,7 +412,10 @@ def test_estimator_lowest_of_keeps_the_lowest_candidate_and_its_value():
         part = est(cands, lowest_of)
         i = min(lowest_of, key=lambda k: full[k])
         assert min(lowest_of, key=lambda k: part[k]) == i and part[i] == full[i]
-        assert all(part[k] <= full[k] for k in range(len(cands)))
-    # the coarser candidates are worse by their backward half alone: their forward is skipped
+        # the others: a lower value of their own, above the lowest (their evaluation stopped
+        # there, never at it: a stop compared before the square root once let a loser tie)
+        assert all(part[i] < part[k] <= full[k] for k in lowest_of if k != i)
+        assert all(math.isnan(part[k]) for k in range(len(cands)) if k not in lowest_of)
+    # candidates worse than the lowest stop early: some get less than their full value
     part = est(cands, [0, 1, 2, 3])
     assert sum(p < q for p, q in zip(part, full)) >= 1
