@@ -508,10 +508,13 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
     else:
         source_levels = {i: chain_of(i) for i in distinct}
     out: list[LodMesh] = []
+    # a copy has its source's index buffers (reversed when mirrored): the same row layout
+    plans: dict[tuple[int, bool], LayoutPlan] = {}
     for i, (g, verts, pos, idx, uv, normals, others, dups, _) in enumerate(merged):
         copy = copies[i]
         if copy is None:
             levels = source_levels[i]
+            plan_key = (i, False)
         else:
             j, lin, resid, mirrored = copy
             sigma = float(np.linalg.svd(lin, compute_uv=False)[0])
@@ -526,14 +529,58 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
             src_pos = merged[j][2]
             levels = tuple(lv if lv.positions is None else dataclasses.replace(
                 lv, positions=pos + (lv.positions - src_pos) @ lin.T) for lv in levels)
-        vertices, new_levels, counts, starts = vertex_layout(verts, levels)
+            plan_key = (copy[0], bool(mirrored))
+        if plan_key not in plans:
+            plans[plan_key] = layout_plan(levels, verts.shape[0])
+        vertices, new_levels, counts, starts = vertex_layout(verts, levels, plans[plan_key])
         out.append(LodMesh(parts=tuple(g), vertices=vertices, levels=new_levels, vertex_counts=counts,
                            duplicates=dups, copy_of=None if copy is None else copy[0],
                            vertex_starts=starts))
     return out
 
 
-def vertex_layout(verts: np.ndarray, levels: Sequence[LodLevel]
+@dataclass(frozen=True, eq=False)
+class LayoutPlan:
+    """Where a mesh's vertex rows go (:func:`layout_plan`), from its levels' indices alone: the
+    same for every mesh with the same index buffers (a mesh and its affine copies).
+
+    order: (N,) int64 new -> old row of level 0's vertices; indices: per level, (K, 3) uint32
+    into the laid-out rows; counts, starts: per level, the end of the rows it uses and the
+    start of its own rows (0 for levels over level 0's rows); own: per level, None or the
+    (U,) int64 vertices whose moved copies are its own rows, in order of first use."""
+
+    order: np.ndarray
+    indices: tuple[np.ndarray, ...]
+    counts: tuple[int, ...]
+    starts: tuple[int, ...]
+    own: tuple[np.ndarray | None, ...]
+
+
+def layout_plan(levels: Sequence[LodLevel], n: int) -> LayoutPlan:
+    """The row layout of a mesh of ``n`` vertices with these levels (see :func:`vertex_layout`)."""
+    empty = np.zeros((0, 3), np.uint32)
+    order = reorder_for_lod_prefix([lv.indices if lv.positions is None else empty for lv in levels], n)
+    idx, counts = list(order.indices), list(order.vertex_counts)
+    starts = [0] * len(levels)
+    own: list[np.ndarray | None] = [None] * len(levels)
+    end = n
+    for k, lv in enumerate(levels):
+        if lv.positions is None:
+            continue
+        flat = np.asarray(lv.indices, np.int64).reshape(-1)
+        ids, first = np.unique(flat, return_index=True)
+        ids = ids[np.argsort(first, kind="stable")]  # order of first use
+        local = np.zeros(n, np.int64)
+        local[ids] = np.arange(ids.size)
+        idx[k] = (local[np.asarray(lv.indices, np.int64)] + end).astype(np.uint32).reshape(-1, 3)
+        own[k] = ids
+        starts[k] = end
+        end += ids.size
+        counts[k] = end
+    return LayoutPlan(order.order, tuple(idx), tuple(counts), tuple(starts), tuple(own))
+
+
+def vertex_layout(verts: np.ndarray, levels: Sequence[LodLevel], plan: LayoutPlan | None = None
                   ) -> tuple[np.ndarray, tuple[LodLevel, ...], tuple[int, ...], tuple[int, ...]]:
     """The mesh's vertex rows and its levels' indices into them (docs/FORMAT.md).
 
@@ -544,31 +591,19 @@ def vertex_layout(verts: np.ndarray, levels: Sequence[LodLevel]
     the row of the vertex it moved, with the moved position. Returns (rows (N + extra, C),
     levels with remapped ``indices`` and ``positions`` dropped, per level the end of the rows
     it uses (its prefix, or the end of its own rows), per level the start of its own rows or
-    0)."""
-    n = verts.shape[0]
-    empty = np.zeros((0, 3), np.uint32)
-    order = reorder_for_lod_prefix([lv.indices if lv.positions is None else empty for lv in levels], n)
-    rows, idx, counts = [verts[order.order]], list(order.indices), list(order.vertex_counts)
-    starts = [0] * len(levels)
-    end = n
-    for k, lv in enumerate(levels):
-        if lv.positions is None:
-            continue
-        flat = np.asarray(lv.indices, np.int64).reshape(-1)
-        ids, first = np.unique(flat, return_index=True)
-        ids = ids[np.argsort(first, kind="stable")]  # order of first use
-        local = np.zeros(n, np.int64)
-        local[ids] = np.arange(ids.size)
-        own = np.array(verts[ids], dtype=verts.dtype, copy=True)
-        own[:, :3] = lv.positions[ids]
-        rows.append(own)
-        idx[k] = (local[np.asarray(lv.indices, np.int64)] + end).astype(np.uint32).reshape(-1, 3)
-        starts[k] = end
-        end += ids.size
-        counts[k] = end
-    new_levels = tuple(dataclasses.replace(lv, indices=i, positions=None) for lv, i in zip(levels, idx))
-    return (rows[0] if len(rows) == 1 else np.concatenate(rows)), new_levels, tuple(counts), tuple(starts)
+    0). ``plan``: :func:`layout_plan` of levels with these same indices (a copy's source's),
+    or None to make it."""
+    if plan is None:
+        plan = layout_plan(levels, verts.shape[0])
+    rows = [verts[plan.order]]
+    for lv, ids in zip(levels, plan.own):
+        if ids is not None:
+            own = np.array(verts[ids], dtype=verts.dtype, copy=True)
+            own[:, :3] = lv.positions[ids]
+            rows.append(own)
+    new_levels = tuple(dataclasses.replace(lv, indices=i, positions=None) for lv, i in zip(levels, plan.indices))
+    return (rows[0] if len(rows) == 1 else np.concatenate(rows)), new_levels, plan.counts, plan.starts
 
 
 __all__ = ["LodPart", "LodMesh", "balanced_ratios", "build_model_lods", "dedupe_triangles",
-           "find_affine_copies", "merge_groups", "vertex_layout", "LodChain"]
+           "find_affine_copies", "layout_plan", "merge_groups", "vertex_layout", "LayoutPlan", "LodChain"]

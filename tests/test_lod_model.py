@@ -496,6 +496,17 @@ def test_moved_levels_get_their_own_vertex_rows():
     assert own.min() == n and own.max() == n + ids.size - 1
     assert np.allclose(rows[own][..., :3], moved_pos[moved_tri].astype(np.float32))
     assert np.array_equal(rows[own][..., 3:], uv[moved_tri])
+    # the plan depends on the indices alone: a copy (other rows, other moved positions, the
+    # same index buffers) laid out by its source's plan comes out as laid out by its own
+    from assetpipe.pipelines.lod_model import layout_plan
+
+    plan = layout_plan([lv0, plain, moved], n)
+    copy_verts = verts * 2.0 + 1.0
+    copy_levels = [lv0, plain, dataclasses.replace(moved, positions=moved_pos * 2.0 + 1.0)]
+    mine = vertex_layout(copy_verts, copy_levels)
+    shared = vertex_layout(copy_verts, copy_levels, plan)
+    assert np.array_equal(mine[0], shared[0]) and mine[2:] == shared[2:]
+    assert all(np.array_equal(a.indices, b.indices) for a, b in zip(mine[1], shared[1]))
 
 
 def test_moved_levels_measure_lower_and_their_bound_holds():
