@@ -366,8 +366,10 @@ def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
         # its bisector meets the longest side at l1^2 L / (l1^2 + L^2 - l2^2)
         den1 = s1 + L2 - s2
         den2 = s2 + L2 - s1
-        r1 = s1 * L / den1 if s1 > 0.0 else 0.0
-        r2 = s2 * L / den2 if s2 > 0.0 else 0.0
+        # (a denominator that rounds to 0, a side far below the others' rounding, gives inf:
+        # the longest side below)
+        r1 = (s1 * L / den1 if den1 > 0.0 else np.inf) if s1 > 0.0 else 0.0
+        r2 = (s2 * L / den2 if den2 > 0.0 else np.inf) if s2 > 0.0 else 0.0
         r = max(r1, r2)
     else:
         ux, uy, uz = bx - ax, by - ay, bz - az
@@ -375,7 +377,10 @@ def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
         crx = uy * wz - uz * wy
         cry = uz * wx - ux * wz
         crz = ux * wy - uy * wx
-        r = L * l1 * l2 / (2.0 * np.sqrt(crx * crx + cry * cry + crz * crz))  # abc / (4 area)
+        # abc / (4 area); an area that rounds to 0 is unusable: the longest side below (numba
+        # raises on a division by zero: a UV sphere's pole cells stopped a chain)
+        den = 2.0 * np.sqrt(crx * crx + cry * cry + crz * crz)
+        r = L * l1 * l2 / den if den > 0.0 else np.inf
     if not (np.isfinite(r) and r >= 0.0):
         r = L
     return min(r, L) * _UP

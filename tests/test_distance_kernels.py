@@ -71,6 +71,29 @@ def test_covering_radius_is_exact():
     assert rt[0] == pytest.approx(2.5, rel=1e-9)
 
 
+def test_covering_radius_of_corners_within_rounding_of_each_other_is_an_upper_value():
+    """Two corners 1e-17 apart beside a third 0.075 away (a UV sphere's pole cell, from a real
+    chain): the squared sides do not add up exactly and a denominator rounds to 0. numba raises
+    on a division by zero, which stopped the chain; the radius is now the longest side."""
+    cell = np.array([[[7.2168783648703286e-02, -1.9337567297406523e-02, -2.7883876791260265e-01],
+                      [3.0616169978683824e-17, -1.7676253978748463e-17, -2.8867513459481292e-01],
+                      [3.4147900460236046e-17, -9.1499023515386430e-18, -2.8867513459481292e-01]]])
+    a, b, c = (np.ascontiguousarray(cell[:, k]) for k in range(3))
+    r = covering_radius(a, b, c)[0]
+    longest = np.linalg.norm(a[0] - b[0])
+    assert longest / 2 <= r <= longest * (1 + 1e-12)
+    ub = lipschitz_bound(cell, np.zeros((1, 3)))
+    assert np.isfinite(ub).all() and ub[0] >= longest / 2
+    # and the same kind of cells by the hundred: corners 1e-17..1e-15 apart, any third corner
+    rng = np.random.default_rng(12)
+    a = rng.normal(size=(500, 3))
+    b = rng.normal(size=(500, 3)) * 1e-3
+    c = b + rng.normal(size=(500, 3)) * 10.0 ** rng.uniform(-17, -15, size=(500, 1))
+    r = covering_radius(a, b, c)
+    assert np.isfinite(r).all()
+    assert np.all(r >= 0.5 * np.linalg.norm(a - b, axis=1) * (1 - 1e-9))
+
+
 def test_triangle_distance_matches_closest_point():
     rng = np.random.default_rng(9)
     a, b, c = rng.normal(size=(3, 3000, 3))
