@@ -46,3 +46,21 @@ def _watch_parent(parent_pid: int) -> None:
         time.sleep(WATCH_INTERVAL_S)
         if os.getppid() != parent_pid:
             os._exit(1)
+
+
+def warm_lod_kernels() -> None:
+    """Load the LOD step's compiled kernels in this process (numba's import, its first-use
+    set-up and the cached kernels: about 0.7 s a process here), so that worker processes forked
+    afterwards inherit them instead of each loading its own (:meth:`assetpipe.graph.Executor.
+    warm`). A small sphere's chain, measured, on the native simplifier alone: neither the WASM
+    runtime nor OpenCV, which start threads that a fork must not copy."""
+    import numpy as np
+
+    from assetpipe.pipelines.lod import LodOptions, build_lod_chain
+
+    u, v = np.meshgrid(np.linspace(0.0, np.pi, 13), np.linspace(0.0, 2.0 * np.pi, 25), indexing="ij")
+    pos = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(12), np.arange(24), indexing="ij")
+    a = (i * 25 + j).reshape(-1)
+    tri = np.concatenate([np.stack([a, a + 25, a + 1], 1), np.stack([a + 1, a + 25, a + 26], 1)])
+    build_lod_chain(pos, tri.astype(np.uint32), options=LodOptions(move_vertices=False))

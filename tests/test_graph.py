@@ -49,3 +49,45 @@ def test_lod_tasks_start_largest_first_and_outputs_do_not_depend_on_it(tmp_path,
     monkeypatch.undo()
     run_build([src], tmp_path / "out2", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache2")
     assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
+
+
+
+_WARM_SCRIPT = """
+import sys
+from assetpipe.graph import Executor
+
+def loaded():
+    mod = sys.modules.get("assetpipe.pipelines.closest_point")
+    return mod is not None and len(mod._query.signatures) > 0
+
+if __name__ == "__main__":
+    ex = Executor(2)
+    try:
+        cold = [r[:2] for r in ex.map([(loaded,), (loaded,)])]
+        ex.warm()
+        ex.fresh_pool()
+        warm = [r[:2] for r in ex.map([(loaded,), (loaded,)])]
+    finally:
+        ex.close()
+    print(cold == [("ok", False)] * 2, warm == [("ok", True)] * 2)
+"""
+
+
+def test_workers_forked_after_warming_inherit_the_lod_kernels(tmp_path):
+    """A fresh build process (not this test process, which has loaded kernels already): its
+    first workers load no kernels; after warm() and fresh_pool() the new workers start with
+    the ones the parent loaded (0.7 s a process saved)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "warm.py"
+    script.write_text(_WARM_SCRIPT)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True", "True"]
+    from assetpipe.graph import Executor
+
+    inline = Executor(1)  # no pool: nothing to warm, nothing to fork
+    inline.warm()
+    inline.fresh_pool()
+    assert inline.pool is None and inline._warming is None
