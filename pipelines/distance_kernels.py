@@ -418,3 +418,60 @@ def lipschitz_bound(v, d):
         out[i] = min(ub, far)
     return out
 
+
+
+@njit(cache=True, nogil=True)
+def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
+    """The first bounds of every cell in turn, each only where the ones before leave it above
+    ``thr``: :func:`lipschitz_bound`; then :func:`convex_bound` over (hint, f0, f1, f2) (the
+    best of them becomes the cell's hint); then, with ``pair``, :func:`pair_bound` of that hint
+    with f0, f1, f2. Each is taken as the minimum with the ones before. Returns (bound (K,),
+    hint (K,) int64): the values the three kernels give one after another with the cells
+    settled in between dropped (:func:`pipelines.surface_error._bound_direction`), in one
+    pass (no arrays compacted between them).
+
+    Args: v (K, 3, 3) cells; d (K, 3) upper values of the corners' distances; f (K, 3) int64 a
+    target triangle near each corner; hint (K,) int64; a, b, c (F, 3) the target's corners;
+    wtri (F, 3) its triangles over welded vertex ids."""
+    k = v.shape[0]
+    ub = lipschitz_bound(v, d)
+    out_hint = hint.copy()
+    cand = np.empty(4, dtype=np.int64)
+    for i in range(k):
+        if ub[i] <= thr:
+            continue
+        cand[0], cand[1], cand[2], cand[3] = hint[i], f[i, 0], f[i, 1], f[i, 2]
+        bv = np.inf
+        bf = cand[0]
+        for j in range(4):
+            g = cand[j]
+            seen = False
+            for q in range(j):
+                if cand[q] == g:
+                    seen = True
+                    break
+            if seen:
+                continue
+            m = _cell_max(v, i, a, b, c, g) * _UP
+            if m < bv:
+                bv = m
+                bf = g
+        ub[i] = min(ub[i], bv)
+        out_hint[i] = bf
+        if ub[i] <= thr or not pair:
+            continue
+        bp = np.inf
+        for j in range(3):
+            g = f[i, j]
+            if g == bf:
+                continue
+            seen = False
+            for q in range(j):
+                if f[i, q] == g:
+                    seen = True
+                    break
+            if seen:
+                continue
+            bp = min(bp, _pair(v, i, bf, g, a, b, c, wtri))
+        ub[i] = min(ub[i], bp)
+    return ub, out_hint

@@ -53,7 +53,7 @@ import numpy as np
 from assetpipe.core.rows import column_bounds, position_ids
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
-    convex_bound, lipschitz_bound, pair_bound)
+    convex_bound, near_bounds, pair_bound)
 from assetpipe.pipelines.patch_bound import WHY_BOUNDED, WHY_TOO_MANY, patch_bound
 
 DEFAULT_SAMPLES = 50_000
@@ -330,25 +330,16 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
     retry = np.ones(v.shape[0], dtype=bool)
     while v.shape[0]:
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
-        ub = lipschitz_bound(v, d)
-        settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
-        if not v.shape[0]:
-            break
-        # convexity over the triangles already known near the cell (corners' and inherited):
-        # a cell settled here needs no centroid query
+        # the Lipschitz bound; where it leaves the cell above thr, convexity over the
+        # triangles already known near the cell (corners' and inherited: a cell settled here
+        # needs no centroid query); then the pair bound (PAIR_FIRST): one compiled pass
         eng = target.engine
-        known = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 4)
-        val, hint = convex_bound(v, known, eng.a, eng.b, eng.c)
-        ub = np.minimum(ub, val)
+        f = np.ascontiguousarray(f)
+        ub, hint = near_bounds(v, d, f, hint, thr, eng.a, eng.b, eng.c, target.welded_tri,
+                               PAIR_FIRST)
         settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
         if not v.shape[0]:
             break
-        if PAIR_FIRST:
-            ub = np.minimum(ub, pair_bound(v, hint, np.ascontiguousarray(f), eng.a, eng.b, eng.c,
-                                           target.welded_tri))
-            settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
-            if not v.shape[0]:
-                break
         # the height field of the target's patch under the cell (pipelines/patch_bound.py):
         # only triangles within thr of the cell can settle it, so the patch is gathered there
         if PATCH_BOUND and eng.tree.nodes is not None and retry.any():

@@ -181,3 +181,36 @@ def test_pair_bound_holds_and_is_exact_across_a_flat_edge():
     alone = convex_bound(cell, np.array([[0, 1]], dtype=np.int64), A, B, C)[0][0]
     assert alone > 0.1
     assert pair_bound(cell, np.array([0]), np.array([[1]]), A, B, C, T)[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_near_bounds_equal_the_three_kernels_one_after_another():
+    """near_bounds is the Lipschitz, convexity and pair bounds in one pass: the same values
+    and hints as the three kernels with the cells each settles dropped before the next."""
+    from assetpipe.pipelines.distance_kernels import near_bounds
+
+    pos, tri, m = _sphere()
+    a, b, c = _corners(pos, tri)
+    rng = np.random.default_rng(21)
+    k = 600
+    base = rng.integers(0, tri.shape[0], k)
+    cen = (a[base] + b[base] + c[base]) / 3
+    v = np.ascontiguousarray(cen[:, None] * 1.002 + rng.normal(size=(k, 3, 3)) * 0.03)
+    f = np.ascontiguousarray(np.stack([base, rng.integers(0, tri.shape[0], k), base], 1))
+    d = np.ascontiguousarray(rng.random((k, 3)) * 0.01)
+    hint = base.copy()
+    for thr in (0.0, 0.01, 0.03, 0.1):
+        for pair in (True, False):
+            ub, h = near_bounds(v, d, f, hint, thr, a, b, c, tri, pair)
+            want = lipschitz_bound(v, d)
+            want_h = hint.copy()
+            live = want > thr
+            known = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))
+            val, best = convex_bound(v, known, a, b, c)
+            want[live] = np.minimum(want[live], val[live])
+            want_h[live] = best[live]
+            live &= want > thr
+            if pair:
+                pb = pair_bound(v, want_h, f, a, b, c, tri)
+                want[live] = np.minimum(want[live], pb[live])
+            np.testing.assert_array_equal(ub, want)
+            np.testing.assert_array_equal(h, want_h)
