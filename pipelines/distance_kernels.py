@@ -475,3 +475,54 @@ def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
             bp = min(bp, _pair(v, i, bf, g, a, b, c, wtri))
         ub[i] = min(ub[i], bp)
     return ub, out_hint
+
+
+@njit(cache=True, nogil=True)
+def area_cumsum(pos, tri):
+    """(M,) float64: the running sum of the triangles' areas (a non-finite area counts 0),
+    bit for bit numpy's ``cumsum(0.5 * norm(cross(b - a, c - a), axis=1))``, without the
+    (M, 3) arrays it makes. pos (N, 3) float64, tri (M, 3) int64."""
+    m = tri.shape[0]
+    out = np.empty(m)
+    s = 0.0
+    for t in range(m):
+        i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
+        ux, uy, uz = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1], pos[j, 2] - pos[i, 2]
+        wx, wy, wz = pos[k, 0] - pos[i, 0], pos[k, 1] - pos[i, 1], pos[k, 2] - pos[i, 2]
+        cx = uy * wz - uz * wy
+        cy = uz * wx - ux * wz
+        cz = ux * wy - uy * wx
+        ar = 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+        if not np.isfinite(ar):
+            ar = 0.0
+        s += ar
+        out[t] = s
+    return out
+
+
+@njit(cache=True, nogil=True)
+def area_samples(pos, tri, cum, u, r1, r2):
+    """(P, 3) float64 points on the triangles, drawn by area: point i on the triangle where
+    ``u[i] * cum[-1]`` falls in ``cum`` (numpy's searchsorted, side right, clipped to the
+    last), at barycentric weights (1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2): bit for bit
+    what :func:`pipelines.surface_error.sample_surface` computed in numpy."""
+    m = tri.shape[0]
+    n = u.shape[0]
+    total = cum[m - 1]
+    out = np.empty((n, 3))
+    for q in range(n):
+        x = u[q] * total
+        lo, hi = 0, m
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if cum[mid] <= x:
+                lo = mid + 1
+            else:
+                hi = mid
+        t = min(lo, m - 1)
+        s1 = np.sqrt(r1[q])
+        wa, wb, wc = 1.0 - s1, s1 * (1.0 - r2[q]), s1 * r2[q]
+        i, j, k = tri[t, 0], tri[t, 1], tri[t, 2]
+        for e in range(3):
+            out[q, e] = wa * pos[i, e] + wb * pos[j, e] + wc * pos[k, e]
+    return out

@@ -53,7 +53,7 @@ import numpy as np
 from assetpipe.core.rows import column_bounds, position_ids
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
-    convex_bound, near_bounds, pair_bound)
+    area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
 from assetpipe.pipelines.patch_bound import WHY_BOUNDED, WHY_TOO_MANY, patch_bound
 
 DEFAULT_SAMPLES = 50_000
@@ -144,24 +144,22 @@ def sample_surface(
     Args: positions (N, 3) float, indices (M, 3) int. Returns (count, 3) float64 (empty when
     the mesh has no area).
     """
-    pos = np.asarray(positions, dtype=np.float64)
-    tri = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    pos = np.ascontiguousarray(positions, dtype=np.float64)
+    tri = np.ascontiguousarray(np.asarray(indices, dtype=np.int64).reshape(-1, 3))
     if tri.shape[0] == 0 or count <= 0:
         return np.zeros((0, 3))
-    a, b, c = pos[tri[:, 0]], pos[tri[:, 1]], pos[tri[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    area = np.where(np.isfinite(area), area, 0.0)
-    cum = np.cumsum(area)
-    total = cum[-1]
-    if not total > 0:
+    if tri.min() < 0 or tri.max() >= pos.shape[0]:
+        raise IndexError("sample_surface: indices outside the positions")
+    # compiled (distance_kernels.area_cumsum / area_samples): the same numbers as numpy's
+    # cross, norm, cumsum, searchsorted and weighted sums, without their (M, 3) arrays
+    cum = area_cumsum(pos, tri)
+    if not cum[-1] > 0:
         return np.zeros((0, 3))
     rng = np.random.default_rng(seed)
-    which = np.searchsorted(cum, rng.random(count) * total, side="right")
-    which = np.minimum(which, tri.shape[0] - 1)
-    r1 = np.sqrt(rng.random(count))
+    u = rng.random(count)
+    r1 = rng.random(count)
     r2 = rng.random(count)
-    wa, wb, wc = 1.0 - r1, r1 * (1.0 - r2), r1 * r2
-    return wa[:, None] * a[which] + wb[:, None] * b[which] + wc[:, None] * c[which]
+    return area_samples(pos, tri, cum, u, r1, r2)
 
 
 # ----------------------------------------------------------------------------- exact geometry

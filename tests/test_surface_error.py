@@ -285,3 +285,39 @@ def test_bound_against_3m_samples_on_corpus_levels(corpus, model):
         dense = _dense(pos, tri, pos, level, 3_000_000)
         assert e.hausdorff >= dense, (model, ratio)
         assert e.hausdorff <= 1.25 * dense, (model, ratio, e.hausdorff / dense)
+
+
+def _numpy_samples(positions, indices, count, seed):
+    """sample_surface as it was written in numpy (the compiled kernels must give these bits)."""
+    pos = np.asarray(positions, dtype=np.float64)
+    tri = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    a, b, c = pos[tri[:, 0]], pos[tri[:, 1]], pos[tri[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    cum = np.cumsum(np.where(np.isfinite(area), area, 0.0))
+    if not cum[-1] > 0:
+        return np.zeros((0, 3))
+    rng = np.random.default_rng(seed)
+    which = np.minimum(np.searchsorted(cum, rng.random(count) * cum[-1], side="right"), tri.shape[0] - 1)
+    r1 = np.sqrt(rng.random(count))
+    r2 = rng.random(count)
+    wa, wb, wc = 1.0 - r1, r1 * (1.0 - r2), r1 * r2
+    return wa[:, None] * a[which] + wb[:, None] * b[which] + wc[:, None] * c[which]
+
+
+def test_sample_surface_gives_the_numpy_formulas_bits():
+    from assetpipe.pipelines.surface_error import sample_surface
+
+    rng = np.random.default_rng(30)
+    for trial in range(12):
+        n, m = int(rng.integers(3, 3000)), int(rng.integers(1, 5000))
+        pos = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-8, 8)  # tiny to huge coordinates
+        tri = rng.integers(0, n, (m, 3))
+        if trial % 3 == 0:
+            tri[: m // 2, 1] = tri[: m // 2, 0]  # degenerate triangles: no area, never drawn
+        for count in (1, 257, 8192):
+            np.testing.assert_array_equal(sample_surface(pos, tri, count, trial),
+                                          _numpy_samples(pos, tri, count, trial))
+    flat = np.zeros((3, 3))  # no area at all: no samples
+    assert sample_surface(flat, [[0, 1, 2]], 10).shape == (0, 3)
+    with pytest.raises(IndexError):
+        sample_surface(np.eye(3), [[0, 1, 3]], 10)
