@@ -104,6 +104,31 @@ def _cell_max(v, i, a, b, c, f):
     return np.sqrt(m)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _seen_before(row, j):
+    """Whether row[j] is among row[:j] (a triangle listed twice is evaluated once)."""
+    for q in range(j):
+        if row[q] == row[j]:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _convex_cell(v, i, cand, a, b, c):
+    """:func:`convex_bound` of cell i over the triangles ``cand`` (C,): (bound, triangle)."""
+    bv = np.inf
+    bf = cand[0]
+    for j in range(cand.shape[0]):
+        f = cand[j]
+        if _seen_before(cand, j):
+            continue
+        m = _cell_max(v, i, a, b, c, f) * _UP
+        if m < bv:
+            bv = m
+            bf = f
+    return bv, bf
+
+
 @njit(cache=True, nogil=True)
 def convex_bound(v, cand, a, b, c):
     """Convexity bound of every cell over its candidate triangles.
@@ -112,27 +137,11 @@ def convex_bound(v, cand, a, b, c):
     evaluated once). Returns (bound (K,), the candidate that gave it (K,) int64): the smallest
     over candidates F of ``max over corners of d_F``, an upper bound of the distance to the
     target on the whole cell (``d_target <= d_F``, and ``d_F`` is convex)."""
-    k, n = cand.shape
+    k = cand.shape[0]
     val = np.empty(k)
     best = np.empty(k, dtype=np.int64)
     for i in range(k):
-        bv = np.inf
-        bf = cand[i, 0]
-        for j in range(n):
-            f = cand[i, j]
-            seen = False
-            for q in range(j):
-                if cand[i, q] == f:
-                    seen = True
-                    break
-            if seen:
-                continue
-            m = _cell_max(v, i, a, b, c, f) * _UP
-            if m < bv:
-                bv = m
-                bf = f
-        val[i] = bv
-        best[i] = bf
+        val[i], best[i] = _convex_cell(v, i, cand[i], a, b, c)
     return val, best
 
 
@@ -322,24 +331,23 @@ def pair_bound(v, hint, others, a, b, c, wtri):
     Args: v (K, 3, 3) cells; hint (K,) int64 the cell's best single triangle; others (K, C)
     int64 triangles to pair it with (each distinct one != hint tried once); wtri (F, 3) int64
     the target's triangles over welded vertex ids (equal ids: same position)."""
-    k, n = others.shape
+    k = others.shape[0]
     out = np.empty(k)
     for i in range(k):
-        bv = np.inf
-        for j in range(n):
-            f = others[i, j]
-            if f == hint[i]:
-                continue
-            seen = False
-            for q in range(j):
-                if others[i, q] == f:
-                    seen = True
-                    break
-            if seen:
-                continue
-            bv = min(bv, _pair(v, i, hint[i], f, a, b, c, wtri))
-        out[i] = bv
+        out[i] = _pair_cell(v, i, hint[i], others[i], a, b, c, wtri)
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pair_cell(v, i, h, others, a, b, c, wtri):
+    """:func:`pair_bound` of cell i: its best triangle ``h`` paired with each of ``others`` (C,)."""
+    bv = np.inf
+    for j in range(others.shape[0]):
+        f = others[j]
+        if f == h or _seen_before(others, j):
+            continue
+        bv = min(bv, _pair(v, i, h, f, a, b, c, wtri))
+    return bv
 
 
 @njit(cache=True, nogil=True)
@@ -441,39 +449,12 @@ def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
         if ub[i] <= thr:
             continue
         cand[0], cand[1], cand[2], cand[3] = hint[i], f[i, 0], f[i, 1], f[i, 2]
-        bv = np.inf
-        bf = cand[0]
-        for j in range(4):
-            g = cand[j]
-            seen = False
-            for q in range(j):
-                if cand[q] == g:
-                    seen = True
-                    break
-            if seen:
-                continue
-            m = _cell_max(v, i, a, b, c, g) * _UP
-            if m < bv:
-                bv = m
-                bf = g
+        bv, bf = _convex_cell(v, i, cand, a, b, c)
         ub[i] = min(ub[i], bv)
         out_hint[i] = bf
         if ub[i] <= thr or not pair:
             continue
-        bp = np.inf
-        for j in range(3):
-            g = f[i, j]
-            if g == bf:
-                continue
-            seen = False
-            for q in range(j):
-                if f[i, q] == g:
-                    seen = True
-                    break
-            if seen:
-                continue
-            bp = min(bp, _pair(v, i, bf, g, a, b, c, wtri))
-        ub[i] = min(ub[i], bp)
+        ub[i] = min(ub[i], _pair_cell(v, i, bf, f[i], a, b, c, wtri))
     return ub, out_hint
 
 
