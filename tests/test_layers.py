@@ -3,7 +3,7 @@
 Read from the source with ``ast``, imports inside functions included (a lazy import still runs
 up the layers when it runs):
 
-    assetpipe.core                       errors, digests, KTX2, atomic writes: imports only itself
+    assetpipe.core                       errors, digests, KTX2, atomic writes, rows: imports only itself
     assetpipe.cache, assetpipe.pipelines the store; the pure steps: import core (and themselves)
     assetpipe.renderer                   loader, renderer, validator: imports core and cache
     assetpipe (its own modules)          orchestration and the CLI: may import everything
