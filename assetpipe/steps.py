@@ -158,11 +158,13 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
     opts = options_from_json(MeshOptions, mesh_options)
     meta, meshes = load_geometry(store, geometry_digest)
     out_meta, arrays = [], {}
+    order_plans: dict = {}  # the model's distinct index buffers, vertex-cache optimised once
     for i, mesh in enumerate(meshes):
         if uv_set_per_mesh[i] < 0:  # no material of the mesh samples a texture: UVs not computed
             mesh = dataclasses.replace(mesh, uv0=None, uv1=None)
         pm = process_mesh(mesh, opts, uv_set=max(uv_set_per_mesh[i], 0),
-                          double_sided=bool(double_sided[i]) if double_sided else False, offset=offset)
+                          double_sided=bool(double_sided[i]) if double_sided else False, offset=offset,
+                          order_plans=order_plans)
         arrays[f"{i}.vertices"] = pm.vertices
         arrays[f"{i}.indices"] = pm.indices
         out_meta.append({"name": pm.name, "material": pm.material, "degenerate": pm.degenerate_dropped,

@@ -66,12 +66,13 @@ class ProcessedMesh:
 
 
 def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv_set: int = 0,
-                 double_sided: bool = False, offset=None) -> ProcessedMesh:
+                 double_sided: bool = False, offset=None, order_plans: dict | None = None) -> ProcessedMesh:
     """Process one mesh. ``uv_set``: the UV set the material's base colour texture samples
     (its ``texCoord``); it goes into the layout's ``uv0`` slot, the other set into ``uv1``.
     ``double_sided``: the material's; reversed duplicate triangles are dropped only then.
     ``offset`` (3,): subtracted from the positions (in float64) before they are rounded to
-    float32 (a recentred model)."""
+    float32 (a recentred model). ``order_plans``: a dict shared by one model's meshes, which
+    lets :func:`optimize_order` optimise each distinct index buffer once (the same output)."""
     warnings: list[str] = []
     pos = np.asarray(mesh.positions, dtype=np.float64)
     if offset is not None:
@@ -156,7 +157,7 @@ def process_mesh(mesh: MeshData, options: MeshOptions = DEFAULT_MESH_OPTIONS, uv
     duplicates += welded_duplicates
 
     if options.optimize and tris.shape[0]:
-        verts, tris = optimize_order(verts, tris)
+        verts, tris = optimize_order(verts, tris, order_plans)
     else:
         verts, tris = compact(verts, tris)
     return ProcessedMesh(name=mesh.name, material=mesh.material, vertices=verts, indices=tris,
@@ -306,16 +307,27 @@ def compact(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return verts[used], remap[tris].astype(np.uint32)
 
 
-def optimize_order(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """meshoptimizer's vertex cache optimisation, then vertex fetch reordering (and compaction)."""
+def optimize_order(verts: np.ndarray, tris: np.ndarray,
+                   plans: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """meshoptimizer's vertex cache optimisation, then vertex fetch reordering (and compaction).
+
+    Both depend on the index buffer and vertex count alone: ``plans`` (a dict the caller keeps
+    for one model) remembers them by those, so primitives with the same index buffer (a grid
+    of copied spheres: MetalRoughSpheres has 123) are optimised once."""
     import meshoptimizer
 
     n = verts.shape[0]
     flat = np.ascontiguousarray(tris.reshape(-1), dtype=np.uint32)
-    cache_opt = np.empty_like(flat)
-    meshoptimizer.optimize_vertex_cache(cache_opt, flat, flat.size, n)
-    remap = np.empty(n, dtype=np.uint32)
-    unique = meshoptimizer.optimize_vertex_fetch_remap(remap, cache_opt, cache_opt.size, n)
+    key = (n, flat.tobytes()) if plans is not None else None
+    if key is not None and key in plans:
+        cache_opt, remap, unique = plans[key]
+    else:
+        cache_opt = np.empty_like(flat)
+        meshoptimizer.optimize_vertex_cache(cache_opt, flat, flat.size, n)
+        remap = np.empty(n, dtype=np.uint32)
+        unique = meshoptimizer.optimize_vertex_fetch_remap(remap, cache_opt, cache_opt.size, n)
+        if key is not None:
+            plans[key] = (cache_opt, remap, unique)
     # remap[i] = new position of old vertex i (0xFFFFFFFF for unreferenced ones)
     used = remap != np.uint32(0xFFFFFFFF)
     out = np.empty((unique, verts.shape[1]), dtype=verts.dtype)

@@ -359,3 +359,22 @@ def test_inside_out_closed_meshes_are_warned_about():
                                                             double_sided=True).warnings)
     ok = MeshData(name="ball", positions=pos, indices=tris.astype(np.uint32))
     assert not any("inside out" in w for w in process_mesh(ok, MeshOptions(optimize=False)).warnings)
+
+
+def test_optimize_order_plans_are_reused_with_the_same_output():
+    """Two meshes with one index buffer (copies at other places): the vertex-cache and fetch
+    optimisation is made once and gives each what it would alone."""
+    from assetpipe.pipelines.mesh_process import optimize_order
+
+    rng = np.random.default_rng(4)
+    tris = rng.integers(0, 60, (150, 3)).astype(np.uint32)
+    a = rng.normal(size=(60, 5)).astype(np.float32)
+    b = a + 10.0
+    plans: dict = {}
+    for verts in (a, b):
+        alone = optimize_order(verts, tris)
+        shared = optimize_order(verts, tris, plans)
+        assert np.array_equal(alone[0], shared[0]) and np.array_equal(alone[1], shared[1])
+    assert len(plans) == 1
+    optimize_order(a[:59], tris % 59, plans)  # another buffer: a plan of its own
+    assert len(plans) == 2
