@@ -514,10 +514,44 @@ def _reference_uvs(doc: dict[str, Any], data: _DocData) -> bool:
     return changed
 
 
+_GL_TRIANGLE_FAN = 6
+
+
+def _fans_as_triangles(doc: dict[str, Any], data: _DocData) -> bool:
+    """Every TRIANGLE_FAN primitive (mode 6), which trimesh's reader drops, as TRIANGLES over
+    the same vertices: the fan's triangles ``{v[i+1], v[i+2], v[0]}`` of its index list (its
+    indices, or the vertices in order; glTF 2.0, 3.7.2.1), in a new uint32 indices accessor.
+    Without this the source of a fan had no triangles to compare, and a reversed winding
+    in the build went unseen (the Mesh_PrimitiveMode fans: 4 missed mutations). A fan of
+    fewer than three vertices draws nothing and is left as it is. Whether any changed."""
+    changed = False
+    for mesh in doc.get("meshes") or []:
+        for prim in mesh.get("primitives") or []:
+            pos = (prim.get("attributes") or {}).get("POSITION")
+            if prim.get("mode") != _GL_TRIANGLE_FAN or pos is None:
+                continue
+            if prim.get("indices") is not None:
+                order = data.accessor(prim["indices"]).reshape(-1).astype(np.int64)
+            else:
+                order = np.arange(int(doc["accessors"][pos]["count"]), dtype=np.int64)
+            if order.size < 3:
+                continue
+            i = np.arange(order.size - 2)
+            tri = np.stack([order[i + 1], order[i + 2], np.full(i.size, order[0])], 1)
+            flat = np.ascontiguousarray(tri.reshape(-1), "<u4")
+            doc["accessors"].append({"bufferView": data.append(flat), "byteOffset": 0,
+                                     "componentType": 5125, "count": int(flat.size), "type": "SCALAR"})
+            prim["indices"] = len(doc["accessors"]) - 1
+            prim["mode"] = 4
+            changed = True
+    return changed
+
+
 def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     """The source with every KHR_materials_pbrSpecularGlossiness material read as its diffuse
-    (baseColor = diffuseFactor x diffuseTexture) and every sparse accessor made plain
-    (:func:`_densify_sparse`), or None when it has neither.
+    (baseColor = diffuseFactor x diffuseTexture), every sparse accessor made plain
+    (:func:`_densify_sparse`) and every triangle fan made a triangle list
+    (:func:`_fans_as_triangles`), or None when it has none of them.
 
     The renderer draws albedo (factor x texture x vertex colour, no metallic or specular term),
     and the build stores a spec-gloss material's diffuse as its base colour. trimesh instead
@@ -536,8 +570,9 @@ def _spec_gloss_as_diffuse(path: Path) -> tuple[bytes, str] | None:
     sparse = _densify_sparse(doc, data)
     ref_uv = _reference_uvs(doc, data)
     ref_uv = _second_uvs(doc, data) or ref_uv
+    fans = _fans_as_triangles(doc, data)
     data.finish()
-    if not (sparse or ref_uv) and "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
+    if not (sparse or ref_uv or fans) and "KHR_materials_pbrSpecularGlossiness" not in (doc.get("extensionsUsed") or []):
         return None
     for mat in doc.get("materials") or []:
         sg = (mat.get("extensions") or {}).pop("KHR_materials_pbrSpecularGlossiness", None)

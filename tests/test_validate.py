@@ -457,3 +457,40 @@ def test_a_gltf_factor_alpha_without_alpha_mode_is_opaque_in_the_reference(tmp_p
     (tmp_path / "d.obj").write_text("mtllib d.mtl\nusemtl glass\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     (tmp_path / "d.mtl").write_text("newmtl glass\nKd 0.2 0.4 0.8\nd 0.5\n")
     assert load_source_model(tmp_path / "d.obj").materials[0].alpha_mode == "BLEND"
+
+
+@pytest.mark.parametrize("indexed", [False, True])
+def test_triangle_fans_are_compared_with_their_source(tmp_path: Path, indexed: bool) -> None:
+    """trimesh's glTF reader drops TRIANGLE_FAN primitives: the source check had nothing to
+    compare (a skip), so a build with its winding reversed passed (4 missed mutations on the
+    corpus's Mesh_PrimitiveMode fans). The reference now reads a fan as the spec's triangles
+    {v[i+1], v[i+2], v[0]}: the good build passes the source check, the reversed one fails it."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from gltf_builder import GltfBuilder
+
+    from assetpipe.api import build
+    from assetpipe.renderer.source_model import load_source_model
+
+    pentagon = np.array([[0, 0, 0], [1, 0, 0], [1.3, 0.8, 0], [0.5, 1.4, 0], [-0.3, 0.8, 0]], np.float32)
+    b = GltfBuilder()
+    b.add_node(mesh=b.add_triangles(pentagon, [0, 1, 2, 3, 4] if indexed else None, mode=6))
+    (tmp_path / "src").mkdir()
+    src = b.write_gltf(tmp_path / "src" / "fan.gltf")
+    ref = load_source_model(src)
+    tri = ref.indices.reshape(-1, 3)
+    assert tri.shape == (3, 3)  # five vertices: three fan triangles
+    # each one counter-clockwise seen from +z, as the fan winds: {v1, v2, v0}, {v2, v3, v0}, ...
+    p = ref.positions[tri]
+    assert (np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[:, 2] > 0).all()
+    out = tmp_path / "out"
+    assert not build([src], out, jobs=1, cache_dir=tmp_path / "cache").failed
+    r = validate_model(out / "fan.json", OPTS, isolate=False)
+    assert r.check("source").status == "pass", r.check("source")
+    idx = out / "fan.idx"
+    a = np.fromfile(idx, "<u4").reshape(-1, 3)
+    a[:, [1, 2]] = a[:, [2, 1]]
+    a.tofile(idx)
+    r = validate_model(out / "fan.json", OPTS, isolate=False)
+    assert r.check("source").status == "fail"
