@@ -328,11 +328,18 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
 
 # -- textures -------------------------------------------------------------------------------
 
+#: libraries no texture step uses: their versions stay out of its key (installing or removing
+#: meshoptimizer's WASM simplifier, which only the LOD step runs, rebuilt every texture)
+NOT_TEXTURE_LIBS = ("meshoptimizer-wasm",)
+
+
 def texture_key_libs(libs: dict, tex_opts: dict | None) -> dict:
-    """The library versions a texture step's key holds: ``libs``, plus for ETC2 the etcpak
-    build that encodes it (``avx512``/``avx2``/``sse41``/``none``): those builds write different
-    (equally valid) blocks, so a cache shared by machines with different CPUs must not mix them.
-    BC and RGBA8 output does not depend on the CPU (etcpak's own module, numpy, OpenCV)."""
+    """The library versions a texture step's key holds: ``libs`` but :data:`NOT_TEXTURE_LIBS`,
+    plus for ETC2 the etcpak build that encodes it (``avx512``/``avx2``/``sse41``/``none``):
+    those builds write different (equally valid) blocks, so a cache shared by machines with
+    different CPUs must not mix them. BC and RGBA8 output does not depend on the CPU (etcpak's
+    own module, numpy, OpenCV)."""
+    libs = {k: v for k, v in libs.items() if k not in NOT_TEXTURE_LIBS}
     if (tex_opts or {}).get("compression") != "etc2":
         return libs
     from assetpipe.pipelines.texture_compress import etcpak_variant  # noqa: PLC0415

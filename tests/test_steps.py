@@ -17,6 +17,17 @@ def test_etc2_texture_keys_name_the_etcpak_build_that_encodes_them():
     assert "etcpak-build" not in libs  # the caller's dict is not changed
 
 
+def test_texture_keys_leave_out_the_lod_steps_wasm_simplifier():
+    """Installing or removing meshoptimizer's WASM simplifier (the LOD step's alone) must not
+    rebuild textures: the texture key holds every other library and not that one."""
+    libs = {"numpy": "2.0", "pillow": "11", "meshoptimizer-wasm": "1.3.0"}
+    for opts in (None, {"compression": "bc"}, {"compression": "etc2"}):
+        key_libs = texture_key_libs(libs, opts)
+        assert "meshoptimizer-wasm" not in key_libs and key_libs["numpy"] == "2.0"
+        assert texture_key_libs({**libs, "meshoptimizer-wasm": None}, opts) == key_libs
+    assert libs["meshoptimizer-wasm"] == "1.3.0"  # the caller's dict is not changed
+
+
 def test_a_scene_that_drops_lod0_keeps_only_the_rows_its_levels_use():
     """Kept levels (LOD0 dropped): the prefix the levels over LOD0's vertices use, then each
     moved level's own rows moved down behind it; every level draws the same triangles."""
