@@ -34,7 +34,8 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def position_ids(positions: np.ndarray) -> np.ndarray:
     """(N,) int64: equal ids for equal float rows (N, k) (-0.0 equal to 0.0, as ``==`` has
-    it; rows must be free of NaN, which equals nothing)."""
+    it). A row holding NaN, which ``==`` makes equal to nothing, is grouped by its bits: only
+    rows no triangle uses may hold one where this welds."""
     p = np.ascontiguousarray(np.asarray(positions, np.float64) + 0.0)  # + 0.0: -0.0 -> 0.0
     return unique_rows(p.view(np.int64).reshape(p.shape[0], -1))[1]
 
