@@ -35,6 +35,7 @@ from assetpipe.options import DEFAULT_BUILD_OPTIONS, BuildOptions
 from assetpipe.pipelines.lod_options import LodOptions
 from assetpipe.pipelines.mesh_options import MeshOptions
 from assetpipe.pipelines.texture_options import TextureOptions
+from assetpipe.worker_life import usable_cpus
 
 if TYPE_CHECKING:  # numpy and the renderer are imported when validate() or load() runs
     import numpy as np
@@ -57,14 +58,6 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'assetpipe.api' has no attribute {name!r}")
 
 _KEEP = object()  # "not given": keep the value of ``options``
-
-
-def usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask, as ninja counts them), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):  # not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def _paths(inputs: PathLike | Iterable[PathLike]) -> list[Path]:

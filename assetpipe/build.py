@@ -46,8 +46,7 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
     says so on stderr), then starts from the first one's state, so neither loses the other's
     sources or deletes its outputs."""
     from assetpipe import versions
-    from assetpipe.cache.remote import is_url, open_store
-    from assetpipe.cache.store import Store, default_cache_dir
+    from assetpipe.cache.store import Store, default_cache_dir, is_url
     from assetpipe.core.writer import sweep_tmp
 
     scene_paths = [Path(p) for p in inputs if Path(p).suffix.lower() == ".json"]
@@ -62,6 +61,8 @@ def run_build(inputs: list[str | Path], out_dir: Path, options, *, jobs: int = 1
         if hasattr(cache_dir, "get_record"):  # a store made by the caller (a TieredStore, say)
             store = cache_dir
         elif is_url(cache_dir):  # a remote tier (the farm's shared cache) behind the local folder
+            from assetpipe.cache.remote import open_store
+
             store = open_store(cache_dir)
         else:
             store = Store(Path(cache_dir) if cache_dir else default_cache_dir())

@@ -192,7 +192,7 @@ def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, qui
     what its objects can use, and OUT/<scene>.scene.json lists the instances."""
     import dataclasses
 
-    from assetpipe.api import usable_cpus
+    from assetpipe.worker_life import usable_cpus
     from assetpipe.build import run_build
     from assetpipe.build_types import BuildLimits
     from assetpipe.progress import Reporter
@@ -301,7 +301,7 @@ _register_renderer_commands()
 def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border,
           max_texture_size) -> None:
     """Build INPUTS into OUT, then rebuild what changed whenever a source is saved (Ctrl-C stops)."""
-    from assetpipe.api import usable_cpus
+    from assetpipe.worker_life import usable_cpus
     from assetpipe.watch import watch as watch_loop
 
     (jobs, cache_dir, layout, lod_ratios, no_lod, simplifier, lock_border, max_texture_size), _ = \

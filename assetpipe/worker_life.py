@@ -26,6 +26,16 @@ PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 WATCH_INTERVAL_S = 1.0
 
 
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask, as ninja counts them), at least 1: the
+    default worker count (here, not in :mod:`assetpipe.api`, so that the CLI's no-op build does
+    not import the API's modules)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def init_worker(parent_pid: int) -> None:
     """Pool initializer: tie this worker's life to ``parent_pid`` (the build process)."""
     if sys.platform.startswith("linux"):

@@ -39,16 +39,12 @@ from pathlib import Path
 
 from assetpipe.core.errors import CacheError
 from assetpipe.core.hashing import canonical_json, digest_bytes
-from assetpipe.cache.store import Store, _split, default_cache_dir, unwrap_record
+from assetpipe.cache.store import Store, _split, default_cache_dir, is_url, unwrap_record  # is_url re-exported
 
 log = logging.getLogger("assetpipe.cache")
 
 # protocols whose single PUT is atomic (no reader sees a partial object)
 ATOMIC_PUT = {"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss", "adl", "memory"}
-
-
-def is_url(cache: str | os.PathLike | None) -> bool:
-    return cache is not None and "://" in str(cache)
 
 
 def storage_options(protocol: str) -> dict:

@@ -44,6 +44,12 @@ _REFLINK_OK = True  # turned off for this process at the first file system that 
 _KNOWN_DIRS: set[Path] = set()
 
 
+def is_url(cache) -> bool:
+    """Whether ``--cache`` names a remote tier (an fsspec URL) rather than a folder: here, so
+    that a build with a local cache does not import :mod:`assetpipe.cache.remote`."""
+    return cache is not None and "://" in str(cache)
+
+
 def default_cache_dir() -> Path:
     """``$ASSETPIPE_CACHE``, else ``$XDG_CACHE_HOME/assetpipe``, else ``~/.cache/assetpipe``."""
     env = os.environ.get(ENV_VAR)
