@@ -20,7 +20,7 @@ Steps run in phases (import; mesh; lod + textures; encode), each phase's missing
 parallel on a process pool when ``jobs > 1``. Results do not depend on ``jobs``. When an import
 ran, the build process loads the LOD kernels on a thread during the mesh phase and forks new
 workers for the later phases: they inherit the kernels instead of each loading them (numba's
-set-up, 0.7 s a process; :meth:`Executor.warm`).
+set-up, about 0.75 s a process; :meth:`Executor.warm`).
 """
 
 from __future__ import annotations
@@ -122,7 +122,7 @@ class Executor:
     def warm(self) -> None:
         """Start loading the LOD kernels in this process, on a thread (the workers are busy
         with the mesh phase meanwhile): workers forked after :meth:`fresh_pool` inherit them
-        instead of each loading its own, 0.7 s a process (assetpipe/worker_life.py)."""
+        instead of each loading its own, about 0.75 s a process (assetpipe/worker_life.py)."""
         if self.pool is None or self._warming is not None:
             return
         import threading

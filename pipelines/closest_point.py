@@ -367,13 +367,14 @@ _MAX_SEEDS = 64
 
 
 @njit(cache=True, nogil=True)
-def _max_query(p, hint, stop, box, left, first, count, order, table, a, b, c):
+def _max_query(p, stop, box, left, first, count, order, table, a, b, c):
     """The largest squared nearest distance of the points (exact: the largest of what
     :func:`_query` gives them), and whether it stopped early because its square root
     exceeded ``stop`` (compared after the root, which rounds: a stopped value is > stop).
 
     A point is asked in full only when no triangle lies within the largest distance found so
-    far (its hint triangle tried first): a point with one nearer cannot raise the maximum."""
+    far (the previous point's triangle tried first): a point with one nearer cannot raise
+    the maximum."""
     k = p.shape[0]
     stack = np.empty(_STACK, dtype=np.int64)
     sd = np.empty(_STACK)
@@ -382,23 +383,20 @@ def _max_query(p, hint, stop, box, left, first, count, order, table, a, b, c):
     # spatial order: often within of the next one too)
     step = max(1, k // _MAX_SEEDS)
     for i in range(0, k, step):
-        d2, _ = _nearest(p[i, 0], p[i, 1], p[i, 2], hint[i], np.inf, box, left, first, count,
+        d2, _ = _nearest(p[i, 0], p[i, 1], p[i, 2], -1, np.inf, box, left, first, count,
                          order, table, a, b, c, stack, sd)
         m2 = max(m2, d2)
         if np.sqrt(m2) > stop:
             return m2, True
     for i in range(k):
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        h = hint[i]
-        if h >= 0 and _dist2(px, py, pz, a, b, c, h) <= m2:
-            continue
         if last >= 0 and _dist2_table(px, py, pz, table, last) <= m2:
             continue
         j = _within(px, py, pz, m2, box, left, first, count, table, stack)
         if j >= 0:
             last = j
             continue
-        d2, _ = _nearest(px, py, pz, h, np.inf, box, left, first, count, order, table, a, b, c,
+        d2, _ = _nearest(px, py, pz, -1, np.inf, box, left, first, count, order, table, a, b, c,
                          stack, sd)
         if d2 > m2:
             m2 = d2
@@ -501,8 +499,7 @@ class ClosestTriangles:
         out_d[o], out_f[o] = d, f
         return out_d, out_f
 
-    def max_distance(self, points: np.ndarray, hint: np.ndarray | None = None,
-                     stop: float = np.inf) -> tuple[float, bool]:
+    def max_distance(self, points: np.ndarray, stop: float = np.inf) -> tuple[float, bool]:
         """(the largest distance from the points to their nearest triangles, stopped).
 
         Bit for bit ``query(points)[0].max()`` when not stopped, without finding each point's
@@ -518,10 +515,7 @@ class ClosestTriangles:
             raise ValueError("closest-point query: non-finite points")
         if self._tree is None:
             return np.inf, np.inf > stop
-        h = np.full(n, -1, dtype=np.int64) if hint is None else \
-            np.ascontiguousarray(hint, dtype=np.int64)
         if n >= _SORT_MIN:
-            o = spatial_order(p)
-            p, h = p[o], h[o]
-        m2, stopped = _max_query(p, h, float(stop), *self._tree, self.a, self.b, self.c)
+            p = p[spatial_order(p)]
+        m2, stopped = _max_query(p, float(stop), *self._tree, self.a, self.b, self.c)
         return float(np.sqrt(m2)), bool(stopped)

@@ -140,9 +140,6 @@ def test_max_distance_is_the_largest_query_answer_bit_for_bit(m, slivers):
         want = ct.query(pts)[0].max()
         got, stopped = ct.max_distance(pts)
         assert got == want and not stopped
-        # a hint (any triangle) changes nothing
-        got, _ = ct.max_distance(pts, hint=rng.integers(0, tri.shape[0], n))
-        assert got == want
 
 
 def test_max_distance_stops_above_the_bar_with_a_distance_it_evaluated():

@@ -426,11 +426,7 @@ def test_uv_sphere_with_pole_cells_builds_with_finite_bounds():
     sin(2 pi) = -2.4e-16): a level's cell there had two corners 1e-17 apart, and the covering
     radius divided by an area that rounds to 0 (numba raises: the chain stopped). Built in
     place and with moved vertices, every level gets a finite bound."""
-    u, v = np.meshgrid(np.linspace(0.0, np.pi, 13), np.linspace(0.0, 2.0 * np.pi, 25), indexing="ij")
-    pos = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(12), np.arange(24), indexing="ij")
-    a = (i * 25 + j).reshape(-1)
-    tri = np.concatenate([np.stack([a, a + 25, a + 1], 1), np.stack([a + 1, a + 25, a + 26], 1)])
+    pos, tri = _uv_sphere(12, 24, 1.0, 0.0)
     for move in (False, True):
         chain = build_lod_chain(pos, tri.astype(np.uint32), options=LodOptions(move_vertices=move))
         assert len(chain.levels) >= 3
