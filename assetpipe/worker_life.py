@@ -62,8 +62,9 @@ def warm_lod_kernels() -> None:
     """Load the LOD step's compiled kernels in this process (numba's import, its first-use
     set-up and the cached kernels: about 0.75 s in a fresh process here, this chain included),
     so that worker processes forked afterwards inherit them instead of each loading its own
-    (:meth:`assetpipe.graph.Executor.warm`). A small sphere's chain, measured, on the native simplifier alone: neither the WASM
-    runtime nor OpenCV, which start threads that a fork must not copy."""
+    (:meth:`assetpipe.graph.Executor.warm`). A small sphere's chain, measured, on the native
+    simplifier alone: neither the WASM runtime nor OpenCV, which start threads that a fork must
+    not copy."""
     import numpy as np
 
     from assetpipe.pipelines.lod import LodOptions, build_lod_chain
