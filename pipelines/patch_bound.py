@@ -9,7 +9,9 @@ settled: on the bunny the level -> level-0 direction made 80% of the bound's que
 a cell (docs/BUILD.md). This bound settles such a cell without splitting it.
 
 The bound. Put the cell T in its own frame: T in the plane z = 0, its normal the z axis. Let P
-be the target triangles whose boxes meet T's box grown by ``rho`` (the patch). For a point p of
+be the target triangles whose boxes meet T's box grown by ``rho`` and that reach within ``rho``
+of T's plane (the patch; a triangle farther than ``rho`` from the plane is farther than
+``rho`` from T, and leaving triangles out can only make the proof fail). For a point p of
 T and a triangle F of P whose projection onto the plane contains p, the vertical line through
 p meets F at height ``z_F(p)``, so ``d_target(p) <= |z_F(p)|`` (a point of F at that distance).
 If the projections of the triangles of a sheet S of P (below) *cover* T, then
