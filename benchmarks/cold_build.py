@@ -9,7 +9,9 @@ every model file the build finds (assetpipe.inputs.discover_inputs), run JOBS at
 process per file). The two alternate for ``--rounds`` rounds so that machine load hits both
 alike; the ratio of the totals and each round's ratio are printed. gltfpack does less (one level, no textures
 processed, no measurement), which is why the goal is a ratio, not parity: <= 2x (stretch 1x).
-``--quick``: one round.
+``--quick``: one round. ``--also ARGS`` (repeatable): one more build of ours a round with these
+extra build options (e.g. ``--also=--no-lod-move --also=--no-lod``), each timed and compared with
+the same round's gltfpack run: where the time goes, in the same run.
 """
 
 from __future__ import annotations
@@ -41,14 +43,15 @@ def find_gltfpack() -> str | None:
     return found
 
 
-def run_ours(corpus: Path, jobs: int, tmp: Path) -> float:
+def run_ours(corpus: Path, jobs: int, tmp: Path, extra: tuple[str, ...] = ()) -> float:
     out, cache = tmp / "out", tmp / "cache"
     shutil.rmtree(out, ignore_errors=True)
     shutil.rmtree(cache, ignore_errors=True)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     t = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "assetpipe.cli", "build", str(corpus), "-o", str(out),
-                        "--cache", str(cache), "-j", str(jobs), "-q"], env=env, capture_output=True, text=True)
+                        "--cache", str(cache), "-j", str(jobs), "-q", *extra], env=env, capture_output=True,
+                       text=True)
     dt = time.perf_counter() - t
     if r.returncode not in (0, 1):  # 1: some asset failed (the corpus has none), still timed
         raise SystemExit(f"assetpipe build failed ({r.returncode}): {r.stderr[-2000:]}")
@@ -78,7 +81,10 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="one round")
     ap.add_argument("--corpus", type=Path, default=CORPUS)
+    ap.add_argument("--also", action="append", default=[], metavar="ARGS",
+                    help="extra build options of one more variant of ours (repeatable)")
     args = ap.parse_args()
+    variants = [tuple(v.split()) for v in args.also]
     from assetpipe.inputs import discover_inputs
 
     exe = find_gltfpack()
@@ -88,14 +94,19 @@ def main() -> int:
     files = discover_inputs([args.corpus])
     tmp = Path(tempfile.mkdtemp(prefix="coldbuild-"))
     ours, theirs = [], []
+    more: list[list[float]] = [[] for _ in variants]
     try:
         for k in range(1 if args.quick else args.rounds):
             a = run_ours(args.corpus, args.jobs, tmp)
+            extra = [run_ours(args.corpus, args.jobs, tmp, v) for v in variants]
             b, ok = run_gltfpack(exe, files, args.jobs, tmp)
             ours.append(a)
             theirs.append(b)
+            for times, t in zip(more, extra):
+                times.append(t)
             print(f"round {k + 1}: assetpipe build -j {args.jobs}: {a:.2f} s; gltfpack -si 0.5, "
-                  f"{args.jobs} at a time: {b:.2f} s ({ok}/{len(files)} files ok); ratio {a / b:.2f}x",
+                  f"{args.jobs} at a time: {b:.2f} s ({ok}/{len(files)} files ok); ratio {a / b:.2f}x"
+                  + "".join(f"; with {' '.join(v)}: {t:.2f} s, {t / b:.2f}x" for v, t in zip(variants, extra)),
                   flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -103,6 +114,9 @@ def main() -> int:
     print(f"cold build of {len(files)} files over {len(ours)} round(s): ours {sum(ours):.2f} s, "
           f"gltfpack {sum(theirs):.2f} s in total: {sum(ours) / sum(theirs):.2f}x; per-round ratios "
           f"{', '.join(f'{r:.2f}' for r in ratios)} (goal <= 2x, stretch <= 1x)")
+    for v, times in zip(variants, more):
+        print(f"  ours with {' '.join(v)}: {sum(times):.2f} s in total: {sum(times) / sum(theirs):.2f}x of "
+              f"gltfpack's time, {sum(times) / sum(ours):.2f}x of the default build's")
     return 0
 
 
