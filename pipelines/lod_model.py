@@ -11,7 +11,7 @@
    primitives: the importer flattens node transforms into the positions,
    :func:`find_affine_copies`): a copy reuses the chain of the first and its error bound,
    scaled by the map's largest singular value (plus the fit's residual, twice);
-4. with ``LodOptions.balance_meshes`` (off by default), shares each level's triangle budget
+4. with ``LodOptions.balance_meshes`` (on by default), shares each level's triangle budget
    among the distinct meshes by error (:func:`balanced_ratios`): one model-wide ratio, each
    mesh at the count meshoptimizer reaches at a common model-unit error;
 5. builds one chain per distinct mesh (:func:`pipelines.lod.build_lod_chain`) and orders
