@@ -17,7 +17,28 @@ from assetpipe.pipelines.texture_options import OVERSIZE_POLICIES, TEXTURE_CODEC
 _D = DEFAULT_BUILD_OPTIONS
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Commands(click.Group):
+    """The CLI's commands. Those of the layers below (``validate`` and ``preview``: the
+    renderer's; ``cache``: the store's) are imported when named or listed, not at every start
+    (2.7 ms of a no-op build's 100)."""
+
+    LAZY = {"validate": ("assetpipe.renderer.cli_commands", "validate"),
+            "preview": ("assetpipe.renderer.cli_commands", "preview"),
+            "cache": ("assetpipe.cache_cli", "cache")}
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | set(self.LAZY))
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name in self.LAZY and name not in self.commands:
+            import importlib
+
+            module, attr = self.LAZY[name]
+            self.add_command(getattr(importlib.import_module(module), attr), name)
+        return super().get_command(ctx, name)
+
+
+@click.group(cls=_Commands, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="assetpipe")
 def main() -> None:
     """Content-hashed asset pipeline: glTF 2.0 / OBJ to engine-ready idx/vtx/json."""
@@ -273,16 +294,6 @@ def inspect(model_json: Path) -> None:
     click.echo("consistent: yes")
 
 
-def _register_renderer_commands() -> None:
-    from assetpipe.renderer.cli_commands import preview, validate  # light: vulkan is imported when they run
-
-    main.add_command(validate)
-    main.add_command(preview)
-
-
-_register_renderer_commands()
-
-
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True, path_type=Path))
 @click.option("-o", "--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
@@ -336,14 +347,6 @@ def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratio
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
 
-
-def _register_cache_commands() -> None:
-    from assetpipe.cache_cli import cache
-
-    main.add_command(cache)
-
-
-_register_cache_commands()
 
 if __name__ == "__main__":  # pragma: no cover
     main()

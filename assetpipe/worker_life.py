@@ -17,7 +17,6 @@ the next build sweeps.
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import threading
 import time
@@ -41,6 +40,7 @@ def init_worker(parent_pid: int) -> None:
     if sys.platform.startswith("linux"):
         try:
             import ctypes
+            import signal
 
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -66,6 +65,8 @@ class StatCache:
             return
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            import tempfile  # only when saving: it imports shutil, bz2 and lzma
+
             fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".stat-cache.")
         except OSError:  # not saved: the next build re-reads the files, nothing worse
             return

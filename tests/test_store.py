@@ -125,7 +125,9 @@ def test_write_failure_is_a_cache_error(store, monkeypatch):
     def full(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(store_mod.tempfile, "mkstemp", full)
+    import tempfile  # the store imports it when it first writes a blob
+
+    monkeypatch.setattr(tempfile, "mkstemp", full)
     with pytest.raises(CacheError, match="cannot write to the cache folder .*No space left on device"):
         store.put_blob(b"data")
 
@@ -243,3 +245,21 @@ def test_a_build_session_dropped_without_end_build_unregisters(tmp_path):
     assert path.exists()
     del session  # a build that raised: its frame, and the session, are dropped
     assert not path.exists() and list((tmp_path / "cache" / "builds").iterdir()) == []
+
+
+def test_small_files_step_over_a_stale_temporary(store, monkeypatch):
+    """The build's lookup record is written through a temporary named by the pid and a
+    counter (not tempfile, which a no-op build does not import): one a killed process with
+    the same pid left behind is stepped over, not overwritten, and the record lands whole."""
+    import itertools
+
+    monkeypatch.setattr(store_mod, "_SMALL_NAMES", itertools.count())
+    store.root.mkdir(parents=True, exist_ok=True)
+    stale = store.root / f".tmp-{os.getpid()}-0"
+    stale.write_bytes(b"left by a killed build")
+    store.hits, store.misses = 3, 1
+    store.end_build(None, store.root.parent / "out", seconds=0.5)
+    rec = json.loads((store.root / store_mod.LAST_BUILD).read_text())
+    assert (rec["lookups"], rec["hits"], rec["seconds"]) == (4, 3, 0.5)
+    assert stale.read_bytes() == b"left by a killed build"
+    assert sorted(p.name for p in store.root.glob(".tmp-*")) == [stale.name]
