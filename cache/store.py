@@ -25,8 +25,8 @@ Imports only the standard library and xxhash (the no-op build path uses it).
 from __future__ import annotations
 
 import errno
-import json
 import itertools
+import json
 import os
 import time
 from pathlib import Path
@@ -248,7 +248,7 @@ class Store:
             elif _reflink(path, tmp):
                 how = "reflink"
             else:
-                import shutil  # only when a blob is exported: bz2 and lzma with it, 3 ms of a no-op build
+                import shutil  # only when a blob is exported (with bz2 and lzma: 3 ms of a no-op)
 
                 shutil.copyfile(path, tmp)
                 os.chmod(tmp, 0o644)
