@@ -23,10 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from assetpipe.core.rows import column_bounds
 from numba import njit
 
+from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines.distance_kernels import _dist2, dist2_parts, triangle_parts
 
 #: triangles per leaf at most: 4 measured fastest on the bunny (69k triangles) among 2, 4, 8

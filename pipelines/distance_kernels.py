@@ -427,7 +427,6 @@ def lipschitz_bound(v, d):
     return out
 
 
-
 @njit(cache=True, nogil=True)
 def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
     """The first bounds of every cell in turn, each only where the ones before leave it above

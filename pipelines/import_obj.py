@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from assetpipe.core.rows import unique_rows
 from assetpipe.core.errors import AssetError, InvalidGeometryError
+from assetpipe.core.rows import unique_rows
 from assetpipe.pipelines.budgets import DEFAULT_INPUT_BUDGETS, InputBudgets
 from assetpipe.pipelines.model import ImportedModel, MeshData
 from assetpipe.pipelines.obj_mtl import Finder, ObjContext, load_materials

@@ -50,7 +50,7 @@ from typing import Sequence
 
 import numpy as np
 
-from assetpipe.core.rows import column_bounds, position_ids
+from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
@@ -355,13 +355,12 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             break
         # the centroid's nearest triangle: usually the one whose plane the whole of T is near
         cen = v.mean(axis=1)
-        dc, fc = target.engine.query(cen, ub, hint)
+        dc, fc = eng.query(cen, ub, hint)
         out.queries += k
         out.lower = max(out.lower, float(dc.max()))
         lower = max(lower, out.lower)
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         # convexity: d_target <= d_F for any target triangle F, and d_F is convex on T
-        eng = target.engine
         cand = np.ascontiguousarray(np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 5)
         val, hint = convex_bound(v, cand, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
@@ -383,10 +382,11 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         rad = np.minimum(np.minimum(d, np.roll(d, -1, axis=1)) + half, ub[:, None])
         # an edge shared by two live cells has one midpoint (bit-identical: (a + b) / 2 is
         # symmetric): ask it once, with the smaller of the two radii (both are upper values)
+        # (rows equal bit for bit: core.rows over the coordinates' bits, 1.1-1.3x faster than
+        # np.unique over 24-byte voids for 3k-300k midpoints)
         flat = np.ascontiguousarray(mids.reshape(-1, 3))
-        uniq, first, inv = np.unique(flat.view(np.dtype((np.void, 24))).reshape(-1),
-                                     return_index=True, return_inverse=True)
-        inv = inv.reshape(-1)
+        first, inv = unique_rows(flat.view(np.int64))
+        uniq = flat[first]
         uhint = f.reshape(-1)[first]  # the triangle near the edge's first corner (ab: a, ...)
         urad = np.full(uniq.shape[0], np.inf)
         np.minimum.at(urad, inv, rad.reshape(-1))
@@ -395,7 +395,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
             out.converged = False
             v = v[:0]
             break
-        du, fu = target.engine.query(uniq.view(np.float64).reshape(-1, 3), urad, uhint)
+        du, fu = eng.query(uniq, urad, uhint)
         out.queries += uniq.shape[0]
         dm, fm = du[inv].reshape(k, 3), fu[inv].reshape(k, 3)
         out.lower = max(out.lower, float(dm.max()))

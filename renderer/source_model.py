@@ -523,7 +523,11 @@ def _fans_as_triangles(doc: dict[str, Any], data: _DocData) -> bool:
     indices, or the vertices in order; glTF 2.0, 3.7.2.1), in a new uint32 indices accessor.
     Without this the source of a fan had no triangles to compare, and a reversed winding
     in the build went unseen (the Mesh_PrimitiveMode fans: 4 missed mutations). A fan of
-    fewer than three vertices draws nothing and is left as it is. Whether any changed."""
+    fewer than three vertices draws nothing and is left as it is. Whether any changed.
+
+    Written here, not taken from the importer (``pipelines.import_gltf``, which triangulates
+    fans the same way): the source reference checks the build independently of it, and the
+    renderer's layer does not import the pipelines' (docs/ARCHITECTURE.md)."""
     changed = False
     for mesh in doc.get("meshes") or []:
         for prim in mesh.get("primitives") or []:

@@ -51,7 +51,6 @@ def test_lod_tasks_start_largest_first_and_outputs_do_not_depend_on_it(tmp_path,
     assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
 
 
-
 _WARM_SCRIPT = """
 import sys
 from assetpipe.graph import Executor
