@@ -22,8 +22,8 @@ from assetpipe.inputs import assign_ids, discover_inputs
 
 
 def _format_exc() -> str:
-    """The current exception's traceback (traceback, with textwrap, is 3 ms of a no-op build's
-    imports: only when a step fails)."""
+    """The current exception's traceback (importing traceback, with textwrap, took 1.7 ms of a
+    no-op build: only when something fails)."""
     import traceback
 
     return traceback.format_exc()

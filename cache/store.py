@@ -248,7 +248,7 @@ class Store:
             elif _reflink(path, tmp):
                 how = "reflink"
             else:
-                import shutil  # only when a blob is exported (with bz2 and lzma: 3 ms of a no-op)
+                import shutil  # only when a blob is exported (it imports bz2 and lzma)
 
                 shutil.copyfile(path, tmp)
                 os.chmod(tmp, 0o644)
