@@ -390,6 +390,27 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
         ok = True
         for q in range(nu):
             cnt = ucount[q]
+            # what would be wrong with this edge if it reached into T (cheap), and only then
+            # whether it does (the first bad edge that reaches decides, in the same order as
+            # when reaching was tested first: the same values and reasons, and 6% less time on
+            # the corpus's captured cells, 1.98 -> 1.85 s)
+            bad = 0
+            if cnt != 2:
+                bad = WHY_BORDER if cnt == 1 else WHY_NON_MANIFOLD
+            else:
+                ja, ea = uref0[q] // 3, uref0[q] % 3
+                jb, eb = uref1[q] // 3, uref1[q] % 3
+                if wtri[sel[ja], ea] == wtri[sel[ja], (ea + 1) % 3]:
+                    bad = WHY_FOLDED  # a degenerate edge (one welded vertex)
+                else:
+                    s1 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
+                                 fx[ja, (ea + 2) % 3], fy[ja, (ea + 2) % 3])
+                    s2 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
+                                 fx[jb, (eb + 2) % 3], fy[jb, (eb + 2) % 3])
+                    if not ((s1 > margin2 and s2 < -margin2) or (s1 < -margin2 and s2 > margin2)):
+                        bad = WHY_FOLDED
+            if bad == 0:
+                continue
             # reaching: any copy's segment not separated from T (the copies join the same two
             # welded positions, maybe in the other direction, which rounds the side tests
             # differently: each is tried until one reaches, as when the edges were sorted)
@@ -422,24 +443,9 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
                             reaching = True
                             break
             if reaching:
-                if cnt != 2:
-                    ok = False
-                    why[i] = WHY_BORDER if cnt == 1 else WHY_NON_MANIFOLD
-                    break
-                ja, ea = uref0[q] // 3, uref0[q] % 3
-                jb, eb = uref1[q] // 3, uref1[q] % 3
-                if wtri[sel[ja], ea] == wtri[sel[ja], (ea + 1) % 3]:
-                    ok = False  # a degenerate edge (one welded vertex)
-                    why[i] = WHY_FOLDED
-                    break
-                s1 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
-                             fx[ja, (ea + 2) % 3], fy[ja, (ea + 2) % 3])
-                s2 = _orient(fx[ja, ea], fy[ja, ea], fx[ja, (ea + 1) % 3], fy[ja, (ea + 1) % 3],
-                             fx[jb, (eb + 2) % 3], fy[jb, (eb + 2) % 3])
-                if not ((s1 > margin2 and s2 < -margin2) or (s1 < -margin2 and s2 > margin2)):
-                    ok = False
-                    why[i] = WHY_FOLDED
-                    break
+                ok = False
+                why[i] = bad
+                break
         if ok:
             # points within ``margin`` of T's border may be uncovered (edges reaching less
             # than that into T are not checked): each is within margin * size / inradius of
