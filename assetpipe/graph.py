@@ -116,6 +116,9 @@ class Executor:
         self.jobs = max(1, int(jobs))
         self.pool = None
         self._warming = None
+        from assetpipe.worker_life import keep_freed_memory
+
+        keep_freed_memory()  # before the workers fork: they inherit it
         if self.jobs > 1:  # multiprocessing costs ~15 ms to import: only when asked for
             self.pool = self._new_pool()
 

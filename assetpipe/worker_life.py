@@ -51,6 +51,35 @@ def init_worker(parent_pid: int) -> None:
     threading.Thread(target=_watch_parent, args=(parent_pid,), name="assetpipe-parent-watch", daemon=True).start()
 
 
+#: glibc malloc: blocks up to this size come from the heap, not a fresh mmap each (M_MMAP_THRESHOLD)
+MMAP_THRESHOLD = 256 << 20
+#: glibc malloc: freed heap memory is given back to the system only beyond this (M_TRIM_THRESHOLD)
+TRIM_THRESHOLD = 512 << 20
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # <malloc.h>
+
+
+def keep_freed_memory() -> bool:
+    """Let this process (and the workers it forks afterwards) reuse the memory it frees.
+
+    By default glibc maps every block over 128 kB-32 MB afresh and unmaps it when freed, so
+    each large numpy temporary (a decoded texture, a mip level, a bound's cell arrays) costs
+    the kernel a page fault per 4 kB page zeroed again. A cold build of the corpus took about
+    470k page faults and 2.1-2.2 s of system time that way; kept on the heap (blocks up to
+    :data:`MMAP_THRESHOLD`, trimmed beyond :data:`TRIM_THRESHOLD`), about 280k and 1.8 s, the
+    texture tasks' faults 177k -> 41k (same peak memory, 443-456 MB). Results do not depend on
+    it. Returns whether it applied (glibc only)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
 def _watch_parent(parent_pid: int) -> None:
     while True:
         time.sleep(WATCH_INTERVAL_S)
