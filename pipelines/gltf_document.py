@@ -130,6 +130,119 @@ def _check_sparse(i: int, sparse: dict) -> str | None:
     return None
 
 
+def _index_ok(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _number_ok(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _check_fields(where: str, obj: dict, numbers=(), vectors=(), indices=()) -> str | None:
+    """Optional fields of ``obj``: ``numbers`` (names), ``vectors`` ((name, length)),
+    ``indices`` (names: non-negative integers)."""
+    for key in numbers:
+        if obj.get(key) is not None and not _number_ok(obj[key]):
+            return f"{where}.{key} is not a number"
+    for key, length in vectors:
+        if obj.get(key) is not None and not _numbers_ok(obj[key], length):
+            return f"{where}.{key} is not {length} numbers"
+    for key in indices:
+        if obj.get(key) is not None and not _index_ok(obj[key]):
+            return f"{where}.{key} is not a non-negative integer"
+    return None
+
+
+def _extensions(where: str, obj: dict) -> tuple[dict, str | None]:
+    """``obj``'s extensions (an object, or absent) and the problem with them."""
+    exts = obj.get("extensions")
+    if exts is None:
+        return {}, None
+    if not isinstance(exts, dict):
+        return {}, f"{where}.extensions is not an object"
+    return exts, None
+
+
+def _check_texture_info(where: str, info: Any) -> str | None:
+    """A material's texture reference (glTF textureInfo): an object whose ``index`` is a texture
+    index; ``texCoord`` a set number, ``scale``/``strength`` numbers; KHR_texture_transform's
+    offset, rotation, scale and texCoord."""
+    if info is None:
+        return None
+    if not isinstance(info, dict):
+        return f"{where} is not a texture reference (an object with an 'index')"
+    if not _index_ok(info.get("index")):
+        return f"{where}.index is missing or not a texture index"
+    problem = _check_fields(where, info, numbers=("scale", "strength"), indices=("texCoord",))
+    if problem:
+        return problem
+    exts, problem = _extensions(where, info)
+    if problem:
+        return problem
+    tt = exts.get("KHR_texture_transform")
+    if tt is not None:
+        sub = f"{where}.extensions.KHR_texture_transform"
+        if not isinstance(tt, dict):
+            return f"{sub} is not an object"
+        return _check_fields(sub, tt, numbers=("rotation",), vectors=(("offset", 2), ("scale", 2)),
+                             indices=("texCoord",))
+    return None
+
+
+def _check_material(i: int, mat: dict) -> str | None:
+    """The parts of material ``i`` the importer reads (the glTF 2.0 schema's types)."""
+    where = f"materials[{i}]"
+    pbr = mat.get("pbrMetallicRoughness")
+    if pbr is not None:
+        sub = f"{where}.pbrMetallicRoughness"
+        problem = _check_fields(sub, pbr, numbers=("metallicFactor", "roughnessFactor"),
+                                vectors=(("baseColorFactor", 4),))
+        for key in ("baseColorTexture", "metallicRoughnessTexture"):
+            problem = problem or _check_texture_info(f"{sub}.{key}", pbr.get(key))
+        if problem:
+            return problem
+    for key in ("normalTexture", "occlusionTexture", "emissiveTexture"):
+        problem = _check_texture_info(f"{where}.{key}", mat.get(key))
+        if problem:
+            return problem
+    problem = _check_fields(where, mat, vectors=(("emissiveFactor", 3),))
+    if problem:
+        return problem
+    exts, problem = _extensions(where, mat)
+    if problem:
+        return problem
+    sg = exts.get("KHR_materials_pbrSpecularGlossiness")
+    if sg is not None:
+        sub = f"{where}.extensions.KHR_materials_pbrSpecularGlossiness"
+        if not isinstance(sg, dict):
+            return f"{sub} is not an object"
+        problem = _check_fields(sub, sg, numbers=("glossinessFactor",),
+                                vectors=(("diffuseFactor", 4), ("specularFactor", 3)))
+        for key in ("diffuseTexture", "specularGlossinessTexture"):
+            problem = problem or _check_texture_info(f"{sub}.{key}", sg.get(key))
+        if problem:
+            return problem
+    return None
+
+
+def _check_draco(where: str, prim: dict) -> str | None:
+    exts, problem = _extensions(where, prim)
+    if problem:
+        return problem
+    draco = exts.get("KHR_draco_mesh_compression")
+    if draco is None:
+        return None
+    sub = f"{where}.extensions.KHR_draco_mesh_compression"
+    if not isinstance(draco, dict):
+        return f"{sub} is not an object"
+    if not _index_ok(draco.get("bufferView")):
+        return f"{sub}.bufferView is missing or not a buffer view index"
+    attributes = draco.get("attributes")
+    if not isinstance(attributes, dict) or not all(_index_ok(v) for v in attributes.values()):
+        return f"{sub}.attributes is not an object of attribute ids"
+    return None
+
+
 def _type_ok(value: Any, types: tuple) -> bool:
     if value is None:
         return True
@@ -170,6 +283,18 @@ def check_structure(doc: dict) -> str | None:
                 for key, length in _NODE_VECTORS.items():
                     if item.get(key) is not None and not _numbers_ok(item[key], length):
                         return f"nodes[{i}].{key} is not {length} numbers"
+            if array == "materials":
+                problem = _check_material(i, item)
+                if problem:
+                    return problem
+            if array in ("bufferViews", "textures"):
+                exts, problem = _extensions(f"{array}[{i}]", item)
+                # a texture's image may come from an extension (KHR_texture_basisu, EXT_texture_webp)
+                for name, ext in exts.items() if array == "textures" else ():
+                    if isinstance(ext, dict) and ext.get("source") is not None and not _index_ok(ext["source"]):
+                        problem = problem or f"textures[{i}].extensions.{name}.source is not an image index"
+                if problem:
+                    return problem
             if array == "scenes" and item.get("nodes") is not None and not _ints_ok(item["nodes"]):
                 return f"scenes[{i}].nodes is not a list of node indices"
             if array == "meshes":
@@ -185,6 +310,9 @@ def check_structure(doc: dict) -> str | None:
                     for name, acc in attributes.items():
                         if not isinstance(acc, int) or isinstance(acc, bool) or acc < 0:
                             return f"meshes[{i}].primitives[{j}].attributes.{name} is not an accessor index"
+                    problem = _check_draco(f"meshes[{i}].primitives[{j}]", prim)
+                    if problem:
+                        return problem
                     for t, target in enumerate(prim.get("targets") or []):
                         if not isinstance(target, dict) or not all(
                                 isinstance(a, int) and not isinstance(a, bool) and a >= 0 for a in target.values()):
@@ -193,4 +321,7 @@ def check_structure(doc: dict) -> str | None:
                        ("animations", (_LIST,))):
         if not _type_ok(doc.get(key), types):
             return f"'{key}' has the wrong type"
+    for key in ("extensionsRequired", "extensionsUsed"):
+        if not all(isinstance(name, str) for name in doc.get(key) or []):
+            return f"'{key}' is not a list of extension names"
     return None

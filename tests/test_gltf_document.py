@@ -93,3 +93,80 @@ def test_structure_check_covers_nested_values(edit, phrase):
     edit(doc)
     problem = check_structure(doc)
     assert problem is not None and __import__("re").search(phrase, problem), problem
+
+
+# -- materials, texture references and extensions (fuzz seed 28: an int where a texture
+# reference belongs reached the importer as an AttributeError) ----------------------------------
+
+MATERIAL_DOC = {
+    "asset": {"version": "2.0"}, "textures": [{"source": 0}], "images": [{"uri": "a.png"}],
+    "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "texCoord": 0},
+                                            "baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.5},
+                   "normalTexture": {"index": 0, "scale": 1.0}, "emissiveFactor": [0, 0, 0],
+                   "extensions": {"KHR_materials_pbrSpecularGlossiness": {
+                       "diffuseTexture": {"index": 0, "extensions": {"KHR_texture_transform": {
+                           "offset": [0, 0], "scale": [2, 2], "rotation": 0.5, "texCoord": 0}}},
+                       "diffuseFactor": [1, 1, 1, 1], "specularFactor": [1, 1, 1], "glossinessFactor": 1}}}],
+    "buffers": [{"byteLength": 4}], "bufferViews": [{"buffer": 0, "byteLength": 4}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "extensions": {
+        "KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}}}]}],
+    "extensionsUsed": ["KHR_draco_mesh_compression", "KHR_texture_transform"],
+}
+
+
+def _pbr(d):
+    return d["materials"][0]["pbrMetallicRoughness"]
+
+
+def _sg(d):
+    return d["materials"][0]["extensions"]["KHR_materials_pbrSpecularGlossiness"]
+
+
+@pytest.mark.parametrize("edit,phrase", [
+    (lambda d: _pbr(d).update(baseColorTexture=1000000000),
+     r"pbrMetallicRoughness\.baseColorTexture is not a texture reference"),
+    (lambda d: _pbr(d).update(metallicRoughnessTexture=[1]), r"metallicRoughnessTexture is not a texture reference"),
+    (lambda d: _pbr(d)["baseColorTexture"].update(index="0"), r"baseColorTexture\.index is missing or not a texture index"),
+    (lambda d: _pbr(d)["baseColorTexture"].pop("index"), r"baseColorTexture\.index is missing"),
+    (lambda d: _pbr(d)["baseColorTexture"].update(texCoord=-1), r"baseColorTexture\.texCoord is not a non-negative integer"),
+    (lambda d: _pbr(d).update(baseColorFactor="red"), r"baseColorFactor is not 4 numbers"),
+    (lambda d: _pbr(d).update(baseColorFactor=[1, 1, 1]), r"baseColorFactor is not 4 numbers"),
+    (lambda d: _pbr(d).update(roughnessFactor=[1]), r"roughnessFactor is not a number"),
+    (lambda d: d["materials"][0].update(emissiveFactor=["a", 1, 1]), r"materials\[0\]\.emissiveFactor is not 3 numbers"),
+    (lambda d: d["materials"][0]["normalTexture"].update(scale="x"), r"normalTexture\.scale is not a number"),
+    (lambda d: d["materials"][0].update(extensions=[1]), r"materials\[0\]\.extensions is not an object"),
+    (lambda d: d["materials"][0]["extensions"].update(KHR_materials_pbrSpecularGlossiness="x"),
+     r"KHR_materials_pbrSpecularGlossiness is not an object"),
+    (lambda d: _sg(d).update(diffuseTexture=3), r"diffuseTexture is not a texture reference"),
+    (lambda d: _sg(d).update(diffuseFactor="x"), r"diffuseFactor is not 4 numbers"),
+    (lambda d: _sg(d)["diffuseTexture"]["extensions"].update(KHR_texture_transform="x"),
+     r"KHR_texture_transform is not an object"),
+    (lambda d: _sg(d)["diffuseTexture"]["extensions"]["KHR_texture_transform"].update(offset=[1, 2, 3]),
+     r"KHR_texture_transform\.offset is not 2 numbers"),
+    (lambda d: _sg(d)["diffuseTexture"]["extensions"]["KHR_texture_transform"].update(rotation=[1]),
+     r"KHR_texture_transform\.rotation is not a number"),
+    (lambda d: _sg(d)["diffuseTexture"]["extensions"]["KHR_texture_transform"].update(texCoord="a"),
+     r"KHR_texture_transform\.texCoord is not a non-negative integer"),
+    (lambda d: d["meshes"][0]["primitives"][0].update(extensions=[1]), r"primitives\[0\]\.extensions is not an object"),
+    (lambda d: d["meshes"][0]["primitives"][0]["extensions"].update(KHR_draco_mesh_compression="x"),
+     r"KHR_draco_mesh_compression is not an object"),
+    (lambda d: d["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"].update(bufferView="a"),
+     r"KHR_draco_mesh_compression\.bufferView is missing or not a buffer view index"),
+    (lambda d: d["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"].update(
+        attributes={"POSITION": "a"}), r"KHR_draco_mesh_compression\.attributes is not an object of attribute ids"),
+    (lambda d: d["bufferViews"][0].update(extensions=[1]), r"bufferViews\[0\]\.extensions is not an object"),
+    (lambda d: d["textures"][0].update(extensions={"KHR_texture_basisu": {"source": "x"}}),
+     r"textures\[0\]\.extensions\.KHR_texture_basisu\.source is not an image index"),
+    (lambda d: d.update(extensionsRequired=[1]), r"'extensionsRequired' is not a list of extension names"),
+])
+def test_materials_and_extensions_are_checked_before_the_importer_reads_them(tmp_path, edit, phrase):
+    doc = json.loads(json.dumps(MATERIAL_DOC))
+    assert check_structure(doc) is None
+    edit(doc)
+    problem = check_structure(doc)
+    assert problem is not None and __import__("re").search(phrase, problem), problem
+    path = tmp_path / "bad.gltf"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(AssetError, match="has a malformed glTF structure") as err:
+        import_gltf(path)
+    assert "bad.gltf" in str(err.value) and "\n" not in str(err.value)
