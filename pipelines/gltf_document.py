@@ -295,6 +295,9 @@ def check_structure(doc: dict) -> str | None:
                         problem = problem or f"textures[{i}].extensions.{name}.source is not an image index"
                 if problem:
                     return problem
+            if array in ("meshes", "nodes") and item.get("weights") is not None and not all(
+                    _number_ok(w) for w in item["weights"]):
+                return f"{array}[{i}].weights is not a list of numbers"
             if array == "scenes" and item.get("nodes") is not None and not _ints_ok(item["nodes"]):
                 return f"scenes[{i}].nodes is not a list of node indices"
             if array == "meshes":

@@ -128,11 +128,18 @@ def node_matrix(node) -> np.ndarray:
     return m
 
 
+def _given(obj: dict, key: str, default):
+    """``obj[key]``, or ``default`` when absent or null."""
+    value = obj.get(key)
+    return default if value is None else value
+
+
 def _uv_transform(ext: dict) -> np.ndarray:
     """KHR_texture_transform as a 3x3 matrix acting on (u, v, 1)."""
-    ox, oy = ext.get("offset", (0.0, 0.0))
-    r = float(ext.get("rotation", 0.0))
-    sx, sy = ext.get("scale", (1.0, 1.0))
+    # (a property given as null counts as absent, as everywhere else in the document)
+    ox, oy = _given(ext, "offset", (0.0, 0.0))
+    r = float(_given(ext, "rotation", 0.0))
+    sx, sy = _given(ext, "scale", (1.0, 1.0))
     t = np.array([[1, 0, ox], [0, 1, oy], [0, 0, 1]], dtype=np.float64)
     c, s = math.cos(r), math.sin(r)
     rot = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]], dtype=np.float64)
@@ -531,14 +538,14 @@ def _materials(ctx: _Ctx):
         base_factor = tuple(pbr.baseColorFactor) if pbr and pbr.baseColorFactor else (1.0, 1.0, 1.0, 1.0)
         base_info = _info_dict(pbr.baseColorTexture) if pbr else None
         if sg is not None:
-            base_factor = tuple(sg.get("diffuseFactor", base_factor))
-            base_info = sg.get("diffuseTexture", base_info)
+            base_factor = tuple(_given(sg, "diffuseFactor", base_factor))
+            base_info = _given(sg, "diffuseTexture", base_info)
         where = f"material {mi} ({mat.name or 'unnamed'})"
         base = _texture_ref(ctx, base_info, where)
         if base is not None:
             tt = (base_info.get("extensions") or {}).get("KHR_texture_transform")
             if tt is not None:
-                tex_coord = int(tt.get("texCoord", base.tex_coord))
+                tex_coord = int(_given(tt, "texCoord", base.tex_coord))
                 uv_transforms[mi] = (tex_coord, _uv_transform(tt))
                 base = TextureRef(base.image, base.sampler, tex_coord)
         others = {}

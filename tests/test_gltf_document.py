@@ -158,6 +158,7 @@ def _sg(d):
     (lambda d: d["textures"][0].update(extensions={"KHR_texture_basisu": {"source": "x"}}),
      r"textures\[0\]\.extensions\.KHR_texture_basisu\.source is not an image index"),
     (lambda d: d.update(extensionsRequired=[1]), r"'extensionsRequired' is not a list of extension names"),
+    (lambda d: d["meshes"][0].update(weights=[0.5, [1]]), r"meshes\[0\]\.weights is not a list of numbers"),
 ])
 def test_materials_and_extensions_are_checked_before_the_importer_reads_them(tmp_path, edit, phrase):
     doc = json.loads(json.dumps(MATERIAL_DOC))
@@ -170,3 +171,12 @@ def test_materials_and_extensions_are_checked_before_the_importer_reads_them(tmp
     with pytest.raises(AssetError, match="has a malformed glTF structure") as err:
         import_gltf(path)
     assert "bad.gltf" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_texture_transform_property_given_as_null_counts_as_absent():
+    import numpy as np
+
+    from assetpipe.pipelines.import_gltf import _uv_transform
+
+    assert np.array_equal(_uv_transform({"offset": None, "rotation": None, "scale": None}), np.eye(3))
+    assert np.array_equal(_uv_transform({}), np.eye(3))
