@@ -123,6 +123,10 @@ def good_png() -> bytes:
 
 # -- glTF -----------------------------------------------------------------------------------------
 
+#: the kinds of sound glTF documents the cases start from (:func:`_seed_gltf`)
+SEED_KINDS = 4
+
+
 def _seed_gltf(kind: int) -> GltfBuilder:
     b = GltfBuilder()
     quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
@@ -137,6 +141,25 @@ def _seed_gltf(kind: int) -> GltfBuilder:
         a = b.add_node(mesh=mesh, root=False)
         c = b.add_node(mesh=mesh, root=False, translation=[2, 0, 0])
         b.add_node(children=[a, c], matrix=[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 5, 0, 0, 1])
+    elif kind == 3:  # every material part the importer reads: PBR and spec-gloss, transforms
+        tex = b.add_texture(data=good_png(), sampler={"magFilter": 9729, "wrapS": 33071})
+        info = {"index": tex, "texCoord": 0, "extensions": {"KHR_texture_transform": {
+            "offset": [0.5, 0], "rotation": 0.3, "scale": [2, 2], "texCoord": 0}}}
+        mat = b.add_material(
+            pbrMetallicRoughness={"baseColorTexture": info, "baseColorFactor": [1, 0.5, 0.5, 1],
+                                  "metallicRoughnessTexture": {"index": tex}, "metallicFactor": 0.2,
+                                  "roughnessFactor": 0.7},
+            normalTexture={"index": tex, "scale": 1.0}, occlusionTexture={"index": tex, "strength": 0.5},
+            emissiveTexture={"index": tex}, emissiveFactor=[0.1, 0.1, 0.1], alphaMode="BLEND",
+            alphaCutoff=0.4, doubleSided=True, name="m",
+            extensions={"KHR_materials_pbrSpecularGlossiness": {
+                "diffuseTexture": {"index": tex}, "diffuseFactor": [1, 1, 1, 1],
+                "specularGlossinessTexture": {"index": tex}, "specularFactor": [1, 1, 1],
+                "glossinessFactor": 0.5}})
+        mesh = b.add_triangles(quad, [0, 1, 2, 0, 2, 3], material=mat, NORMAL=np.tile([0, 0, 1], (4, 1)),
+                               TEXCOORD_0=quad[:, :2])
+        b.add_node(mesh=mesh)
+        b.doc["extensionsUsed"] = ["KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness"]
     else:  # sparse accessor and a morph target
         pos = b.add_accessor(quad)
         idx_view = b.add_view(np.array([1], np.uint16).tobytes())
@@ -204,7 +227,7 @@ def _flip(draw, data: bytes, max_flips: int = 4) -> bytes:
 @st.composite
 def gltf_case(draw) -> dict[str, bytes]:
     """Files of one glTF case: {name: bytes}; the model is the one ending .gltf/.glb."""
-    b = _seed_gltf(draw(st.integers(0, 2)))
+    b = _seed_gltf(draw(st.integers(0, SEED_KINDS - 1)))
     container = draw(st.sampled_from(["gltf", "embedded", "glb"]))
     structural = not _one_in(draw, 4)
     files: dict[str, bytes] = {}
