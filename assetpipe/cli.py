@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -15,6 +16,19 @@ from assetpipe.pipelines.lod_options import SIMPLIFIERS
 from assetpipe.pipelines.texture_options import OVERSIZE_POLICIES, TEXTURE_CODECS
 
 _D = DEFAULT_BUILD_OPTIONS
+
+
+class FiniteFloatRange(click.FloatRange):
+    """A float range that refuses NaN and infinity (``float('inf')`` passes a range with no
+    upper end, and NaN compares false with either end): a budget or size must be a number."""
+
+    name = "finite float range"
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{rv} is not a finite number", param, ctx)
+        return rv
 
 
 class _Commands(click.Group):
@@ -121,13 +135,28 @@ def _project_defaults(inputs, **given):
         merged, origin = resolve(given, flags, project_config_for(list(inputs)))
     except AssetpipeError as exc:
         raise click.ClickException(str(exc)) from None
+    # a value from the project file passes the option's own type, as on the command line (its
+    # range or choices: jobs 0, an infinite budget, an unknown simplifier)
+    params = {p.name: p for p in ctx.command.params}
+    for name, where in origin.items():
+        param = params.get(name)
+        if where in ("command line", "default") or param is None or merged[name] is None or param.is_flag:
+            continue
+        try:
+            merged[name] = param.type_cast_value(ctx, merged[name])
+        except click.BadParameter as exc:
+            raise click.ClickException(f"{where}: {name}: {exc.message}") from None
     return tuple(merged[n] for n in given), origin
 
 
 def eval_ratio(text: str) -> float:
-    """'0.25' or '1/4' -> 0.25 (no eval)."""
+    """'0.25' or '1/4' -> 0.25 (no eval); ValueError for a zero denominator."""
     num, _, den = text.strip().partition("/")
-    return float(num) / float(den) if den else float(num)
+    if not den:
+        return float(num)
+    if float(den) == 0.0:
+        raise ValueError(f"the ratio {text.strip()!r} divides by zero")
+    return float(num) / float(den)
 
 
 @main.command()
@@ -164,7 +193,7 @@ def eval_ratio(text: str) -> float:
                    "-sv) where that measures closer to LOD0; such a level gets its own vertex rows after LOD0's "
                    "(--no-lod-move: every level indexes LOD0's vertices, a prefix each; docs/FORMAT.md) "
                    f"[default: {'on' if _D.lod.move_vertices else 'off'}].")
-@click.option("--lod-max-error", type=float, default=None,
+@click.option("--lod-max-error", type=FiniteFloatRange(min=0), default=None,
               help=f"LOD error budget, a fraction of the mesh's diagonal: a level whose measured error exceeds it is "
                    f"not written; 0 for no budget [default: {_D.lod.max_error:g}].")
 @click.option("--lod-screen-sizes", default=None,
@@ -179,7 +208,7 @@ def eval_ratio(text: str) -> float:
 @click.option("--recenter", is_flag=True,
               help="Write positions relative to each model's bounding-box centre (the offset goes into the "
                    "sidecar's positionOffset): keeps float32 precision for models far from their origin.")
-@click.option("--max-output-mb", type=click.FloatRange(min=0, min_open=True),
+@click.option("--max-output-mb", type=FiniteFloatRange(min=0, min_open=True),
               default=DEFAULT_BUILD_LIMITS.max_output_bytes / 2**20, show_default=True,
               help="Fail a model whose outputs (files and textures) would exceed this many MiB.")
 @click.option("--max-image-pixels", type=click.IntRange(1, None), default=_D.texture.max_pixels, show_default=True,
@@ -192,7 +221,7 @@ def eval_ratio(text: str) -> float:
                    f"textures below the 36 dB (38 dB photographic) goal; docs/FORMAT.md) "
                    f"[default: {_D.texture.compression}].")
 @click.option("--texture-zstd", is_flag=True, help="Zstandard-supercompress the KTX2 levels (KTX2 scheme 2).")
-@click.option("--max-model-mb", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--max-model-mb", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help=f"Refuse a model whose declared geometry (glTF accessor counts times placements) would take "
                    f"more than this many MiB decoded [default: {_D.budgets.max_model_bytes / 2**20:g}].")
 @click.option("--max-placements", type=click.IntRange(1, None), default=None,
@@ -201,7 +230,7 @@ def eval_ratio(text: str) -> float:
 @click.option("--max-triangles", type=click.IntRange(1, None), default=None,
               help=f"Refuse a model with more triangles than this after triangulation "
                    f"[default: {_D.budgets.max_triangles}].")
-@click.option("--max-coordinate", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--max-coordinate", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help=f"Refuse a model with a position coordinate larger than this in absolute value "
                    f"[default: {_D.budgets.max_coordinate:g}].")
 def build(inputs, out_dir, json_report, jobs, cache_dir, scheduler, explain, quiet, layout, lod_ratios, no_lod,

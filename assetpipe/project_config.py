@@ -18,8 +18,9 @@ table, found from the inputs' folders upward. Its keys are the build command's o
     cache = "../.assetpipe-cache"            # relative to the project file
 
 A flag given on the command line overrides the file; ``build --explain`` names where each option
-came from (command line, the project file, or the built-in default). An unknown key or a value
-of the wrong type is an error naming the file and the key.
+came from (command line, the project file, or the built-in default). An unknown key, a value
+of the wrong type, or one its option refuses on the command line too (out of range, not finite,
+not one of the choices) is an error naming the file and the key.
 """
 
 from __future__ import annotations
@@ -66,26 +67,36 @@ class ProjectConfig:
     path: Path | None = None  # the file the values come from (None: no project file)
     values: dict = field(default_factory=dict)
 
+    def _joined(self, key: str, items: tuple[type, ...]) -> str:
+        """A list value as the command line's comma-separated string (a string as it is); an
+        item of another type is a :class:`ProjectConfigError`."""
+        value = self.values[key]
+        if not isinstance(value, list):
+            return value
+        if not all(isinstance(x, items) and not isinstance(x, bool) for x in value):
+            raise ProjectConfigError(f"{self.path}: {key} must be {KEYS[key][1]}, not {value!r}")
+        return ",".join(x if isinstance(x, str) else f"{x:g}" for x in value)
+
     def as_cli(self) -> dict:
         """The values in the command line's terms (the build command's parameter names)."""
         out: dict = {}
         v = self.values
         if "layout" in v:
-            out["layout"] = ",".join(v["layout"]) if isinstance(v["layout"], list) else v["layout"]
+            out["layout"] = self._joined("layout", (str,))
         if "lod_ratios" in v:
-            r = v["lod_ratios"]
-            out["lod_ratios"] = ",".join(f"{x:g}" if not isinstance(x, str) else x for x in r) if isinstance(r, list) else r
+            out["lod_ratios"] = self._joined("lod_ratios", (int, float, str))
         if "lod" in v:
             out["no_lod"] = not v["lod"]
         if "lod_screen_sizes" in v:
-            r = v["lod_screen_sizes"]
-            out["lod_screen_sizes"] = ",".join(f"{x:g}" for x in r) if isinstance(r, list) else r
+            out["lod_screen_sizes"] = self._joined("lod_screen_sizes", (int, float))
         for key in ("simplifier", "lock_border", "lod_balance", "lod_move", "max_texture_size", "jobs", "lod_max_error", "recenter",
                     "max_output_mb", "max_image_pixels", "texture_compression", "texture_zstd",
                     "oversize_textures", "max_model_mb", "max_placements", "max_triangles", "max_coordinate"):
             if key in v:
                 out[key] = v[key]
         if "cache" in v:
+            if not v["cache"].strip():
+                raise ProjectConfigError(f"{self.path}: cache must be {KEYS['cache'][1]}, not an empty string")
             out["cache_dir"] = Path(os.path.normpath(self.path.parent / v["cache"])) if self.path else Path(v["cache"])
         return out
 

@@ -107,3 +107,26 @@ def test_lod_switches_from_the_project_file_and_the_flag(proj, key, field):
     (proj / "proj" / "assetpipe.toml").write_text(f'{key} = "no"\n')
     r = build(proj)
     assert r.exit_code != 0 and key in r.output
+
+
+@pytest.mark.parametrize("text, message", [
+    ("jobs = 0\n", ": jobs: 0 is not in the range 1<=x<=256"),
+    ("jobs = 99999999999999999999\n", ": jobs: 99999999999999999999 is not in the range 1<=x<=256"),
+    ("max_model_mb = inf\n", ": max_model_mb: inf is not a finite number"),
+    ("max_coordinate = nan\n", ": max_coordinate: nan is not a finite number"),
+    ("simplifier = 'fast'\n", ": simplifier: 'fast' is not one of"),
+    ("layout = [1, 2]\n", "layout must be vertex attributes"),
+    ("lod_ratios = '1,1/0'\n", "the ratio '1/0' divides by zero"),
+    ("lod_screen_sizes = [400, 'x']\n", "lod_screen_sizes must be on-screen sizes"),
+    ("cache = ''\n", "cache must be a folder, relative to the project file, not an empty string"),
+])
+def test_project_file_values_pass_the_options_own_checks(proj, text, message):
+    # (the first seven were tracebacks or taken as given: the file's values skipped the options'
+    # ranges and choices, which a flag goes through)
+    f = proj / "proj" / "assetpipe.toml"
+    f.write_text(text)
+    r = build(proj)
+    assert r.exit_code in (1, 2), r.output
+    assert isinstance(r.exception, SystemExit), r.exception
+    assert message in r.output, r.output
+    assert str(f) in r.output or "lod_ratios" in text  # a ratio's error is the command line's own
