@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
 import click
 
 from assetpipe import __version__
+from assetpipe.core.cli_types import FiniteFloatRange
 from assetpipe.core.errors import AssetpipeError
 from assetpipe.build_types import DEFAULT_BUILD_LIMITS
 from assetpipe.options import DEFAULT_BUILD_OPTIONS
@@ -16,19 +16,6 @@ from assetpipe.pipelines.lod_options import SIMPLIFIERS
 from assetpipe.pipelines.texture_options import OVERSIZE_POLICIES, TEXTURE_CODECS
 
 _D = DEFAULT_BUILD_OPTIONS
-
-
-class FiniteFloatRange(click.FloatRange):
-    """A float range that refuses NaN and infinity (``float('inf')`` passes a range with no
-    upper end, and NaN compares false with either end): a budget or size must be a number."""
-
-    name = "finite float range"
-
-    def convert(self, value, param, ctx):
-        rv = super().convert(value, param, ctx)
-        if not math.isfinite(rv):
-            self.fail(f"{rv} is not a finite number", param, ctx)
-        return rv
 
 
 class _Commands(click.Group):
@@ -315,7 +302,12 @@ def inspect(model_json: Path) -> None:
     from assetpipe.inspect import check_model, summarize
 
     problems = check_model(model_json)
-    click.echo(summarize(model_json))
+    try:
+        click.echo(summarize(model_json))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
+        # files the check already found broken (or tampered with) are not summarised: one line
+        if not problems:
+            problems.append(f"{model_json}: cannot summarise the model files ({type(exc).__name__}: {exc})")
     if problems:
         for p in problems:
             click.echo(f"PROBLEM {p}", err=True)

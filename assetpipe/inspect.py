@@ -18,23 +18,42 @@ from assetpipe.format import SEED_MATERIAL_KEYS, SEED_MESH_KEYS, SEED_MODEL_KEYS
 
 
 def _load(model_json: Path):
+    """(ID.json, ID-mat.json, the sidecar or None), each of the shape its format gives it;
+    ValueError (a JSONDecodeError too) or OSError otherwise."""
     model = json.loads(model_json.read_text(encoding="utf-8"))
+    if not isinstance(model, dict) or not isinstance(model.get("meshes"), list) \
+            or not all(isinstance(m, dict) for m in model["meshes"]):
+        raise ValueError(f"{model_json.name} is not a built model's ID.json (an object with a 'meshes' list)")
     base = model_json.parent
-    mid = model.get("id", model_json.stem)
+    mid = str(model.get("id", model_json.stem))
     mats = json.loads((base / f"{mid}-mat.json").read_text(encoding="utf-8"))
+    if not isinstance(mats, list) or not all(isinstance(m, dict) for m in mats):
+        raise ValueError(f"{mid}-mat.json is not a list of materials")
     side_path = base / f"{mid}.asset.json"
     side = json.loads(side_path.read_text(encoding="utf-8")) if side_path.exists() else None
+    if side is not None and not isinstance(side, dict):
+        raise ValueError(f"{mid}.asset.json is not an object")
     return model, mats, side
 
 
 def check_model(model_json: Path) -> list[str]:
     """Problems found (empty when consistent)."""
     model_json = Path(model_json)
-    problems: list[str] = []
     try:
         model, mats, side = _load(model_json)
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
         return [f"{model_json}: cannot read the model files ({exc})"]
+    problems: list[str] = []
+    try:
+        return _check(model_json, model, mats, side, problems)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        # a value of another shape than the format's (a file edited or cut): that is the problem
+        return problems + [f"{model_json}: the model files do not have the format's shape "
+                           f"({type(exc).__name__}: {exc})"]
+
+
+def _check(model_json: Path, model: dict, mats: list, side: dict | None, problems: list[str]) -> list[str]:
+    """:func:`check_model` on loaded files; appends to ``problems`` as it goes."""
     base = model_json.parent
     if tuple(sorted(model)) != tuple(sorted(SEED_MODEL_KEYS)):
         problems.append(f"ID.json keys {sorted(model)} differ from the seed's {sorted(SEED_MODEL_KEYS)}")

@@ -14,7 +14,10 @@ from pathlib import Path
 
 import click
 
+from assetpipe.core.cli_types import FiniteFloatRange
 from assetpipe.core.errors import AssetpipeError
+
+from .results import MAX_RENDER_SIZE
 
 
 def find_built_models(paths: tuple[str, ...] | list[str]) -> list[Path]:
@@ -44,11 +47,13 @@ def _list_checks(ctx: click.Context, _param: click.Parameter, value: bool) -> No
               help="Print every check: what it measures, its tolerance and why, then exit.")
 @click.option("--sources", "source_root", type=click.Path(file_okay=False),
               help="Directory holding the source models (searched recursively) for the source check.")
-@click.option("--size", default=256, show_default=True, help="Render size in pixels (square).")
+@click.option("--size", default=256, show_default=True, type=click.IntRange(1, MAX_RENDER_SIZE),
+              help="Render size in pixels (square).")
 @click.option("--checks", default="all", show_default=True,
               help="Comma-separated checks to run (load, vulkan, bounds, silhouette, source, lods, textures, roles).")
 @click.option("--no-validation-layer", is_flag=True, help="Do not enable the Khronos validation layer.")
-@click.option("--timeout", default=120.0, show_default=True, help="Seconds allowed per asset.")
+@click.option("--timeout", default=120.0, show_default=True, type=FiniteFloatRange(min=0, min_open=True),
+              help="Seconds allowed per asset.")
 @click.option("--json", "json_report", type=click.Path(dir_okay=False), help="Write a JSON report here.")
 @click.option("--json-report", "json_report", type=click.Path(dir_okay=False), hidden=True)
 @click.option("--junit", type=click.Path(dir_okay=False), help="Write a JUnit XML report here.")
@@ -117,7 +122,8 @@ def validate(paths: tuple[str, ...], source_root: str | None, size: int, checks:
 @click.command("preview")
 @click.argument("model_json", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="PNG to write (default: ID-preview.png).")
-@click.option("--size", default=256, show_default=True, help="Size of each view in pixels.")
+@click.option("--size", default=256, show_default=True, type=click.IntRange(1, MAX_RENDER_SIZE),
+              help="Size of each view in pixels.")
 def preview(model_json: str, output: str | None, size: int) -> None:
     """Write a contact sheet of a built model: views, LODs, texture mips."""
     from .preview import make_preview  # noqa: PLC0415

@@ -31,6 +31,7 @@ from .camera import Camera
 from .cull import CULL_MIN_TRIANGLES, Projector
 from .cull import cull as cull_draws
 from .loader import RenderModel, Texture
+from .results import MAX_RENDER_SIZE
 from .shaders import compile_glsl, shader_path
 from .vk_context import Buffer, Image, VkContext
 
@@ -213,7 +214,7 @@ class Renderer:
         """(Re)create the colour and depth targets and the readback buffer at width x height."""
         if (width, height) == (self.width, self.height):
             return
-        if not (0 < width <= 16384 and 0 < height <= 16384):
+        if not (0 < width <= MAX_RENDER_SIZE and 0 < height <= MAX_RENDER_SIZE):
             raise RenderError(f"render size {width}x{height} is out of range")
         self._destroy_targets()
         vk = self.vk

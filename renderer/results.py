@@ -17,6 +17,9 @@ import numpy as np
 
 from .camera import DEFAULT_VIEW
 
+#: the largest render target side (pixels) the offscreen renderer makes
+MAX_RENDER_SIZE = 16384
+
 DEFAULT_VIEWS: tuple[tuple[float, float, float], ...] = (DEFAULT_VIEW, (0.8, -0.3, 0.7), (0.2, -1.0, 0.3))
 
 

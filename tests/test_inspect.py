@@ -198,3 +198,49 @@ def test_lod_index_beyond_its_vertex_count_prefix(model):
     side_path = model.parent / "M.asset.json"
     _edit_json(side_path, lambda d: d["meshes"][1]["lods"][1].update(vertexCount=2))  # LOD1 uses vertices 0..4
     _one(check_model(model), "mesh mesh-1-0 LOD1")
+
+
+def _value_paths(doc, prefix=()):
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield prefix + (k,)
+            yield from _value_paths(v, prefix + (k,))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc[:3]):
+            yield prefix + (i,)
+            yield from _value_paths(v, prefix + (i,))
+
+
+@pytest.mark.parametrize("name", ["M.json", "M-mat.json", "M.asset.json"])
+def test_any_value_of_another_type_is_a_problem_not_a_crash(tmp_path, name):
+    # (a sidecar without its vertexLayout, an ID-mat.json where ID.json belongs, ... were
+    # tracebacks of the check or the summary; every value here is replaced by 5 of other types)
+    from click.testing import CliRunner
+
+    from assetpipe.cli import main
+
+    runner = CliRunner()
+    _build(tmp_path)
+    path = tmp_path / name
+    doc = json.loads(path.read_text())
+    for where in list(_value_paths(doc)):
+        for value in ("x", -1, None, [], {"a": 1}):
+            edited = json.loads(json.dumps(doc))
+            parent = edited
+            for key in where[:-1]:
+                parent = parent[key]
+            parent[where[-1]] = value
+            path.write_text(json.dumps(edited))
+            r = runner.invoke(main, ["inspect", str(tmp_path / "M.json")])
+            assert r.exit_code in (0, 1) and (r.exception is None or isinstance(r.exception, SystemExit)), \
+                (where, value, r.output, r.exception)
+            assert ("consistent: yes" in r.output) == (r.exit_code == 0), (where, value, r.output)
+    path.write_text(json.dumps(doc))
+    assert check_model(tmp_path / "M.json") == []
+
+
+@pytest.mark.parametrize("text", ['[{"id": "M-mat-0"}]', "\x00\x01", '{"id": "M", "meshes": [1]}'])
+def test_a_file_that_is_not_a_model_is_one_problem(tmp_path, text):
+    (tmp_path / "X.json").write_text(text)
+    problems = check_model(tmp_path / "X.json")
+    assert len(problems) == 1 and "cannot read the model files" in problems[0]
