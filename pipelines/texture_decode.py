@@ -41,8 +41,11 @@ _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 # Formats Pillow may identify that we accept (glTF core needs PNG and JPEG; OBJ/MTL files in
 # the wild also use TGA and BMP; GIF/WebP are sniffed by pipelines.image_source).
 _ACCEPTED_FORMATS = frozenset({"PNG", "JPEG", "MPO", "TGA", "BMP", "DIB", "GIF", "WEBP"})
+# (names of Pillow's openers: a JPEG with multi-picture data opens through "JPEG" and reports
+# "MPO"; "MPO" itself is no opener in Pillow 13, and naming it made a JPEG that fails to open a
+# KeyError instead of "cannot identify image file")
 _PIL_FORMAT_HINT = {
-    "image/png": ["PNG"], "image/jpeg": ["JPEG", "MPO"], "image/bmp": ["BMP", "DIB"],
+    "image/png": ["PNG"], "image/jpeg": ["JPEG"], "image/bmp": ["BMP", "DIB"],
     "image/x-tga": ["TGA"], "image/tga": ["TGA"], "image/gif": ["GIF"], "image/webp": ["WEBP"],
 }
 
@@ -192,6 +195,9 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
         with warnings.catch_warnings():
             # Our own max_pixels bound replaces Pillow's global bomb check.
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            # and Pillow's complaints about metadata we do not read (a corrupt EXIF block, a TIFF
+            # tag longer than the file) would be stray lines in the build's output
+            warnings.filterwarnings("ignore", module=r"PIL\.")
             # ...and Pillow's bomb *error* (at twice its limit) must not fire below ours
             saved = Image.MAX_IMAGE_PIXELS
             Image.MAX_IMAGE_PIXELS = max(saved or 0, max_pixels)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import struct
 import zlib
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -258,3 +259,38 @@ def test_a_corrupt_16bit_png_is_one_line_with_nothing_on_stderr(capfd):
         with pytest.raises(InvalidTextureError, match=words):
             decode_image(source(data))
     assert capfd.readouterr().err == ""
+
+
+# -- found by mutating corpus JPEGs (stop 28) ------------------------------------------------------
+
+DATA = Path(__file__).resolve().parent / "data" / "images"
+
+
+def test_every_format_hint_names_one_of_pillows_openers():
+    # a name Pillow has no opener for ("MPO" in Pillow 13: such files open through "JPEG") made
+    # every JPEG that failed to open a KeyError instead of an InvalidTextureError
+    from PIL import Image
+
+    from assetpipe.pipelines.texture_decode import _PIL_FORMAT_HINT
+
+    Image.init()
+    assert [n for names in _PIL_FORMAT_HINT.values() for n in names if n not in Image.OPEN] == []
+
+
+def test_a_jpeg_that_does_not_open_is_an_invalid_texture():
+    src = ImageSource(name="t", data=b"\xff\xd8\xff\xe0" + bytes(20), mime="image/jpeg", origin="t.jpg", digest="x")
+    with pytest.raises(InvalidTextureError, match="t.jpg.*cannot be decoded"):
+        decode_image(src)
+
+
+def test_pillows_complaints_about_metadata_stay_out_of_the_output():
+    # tests/data/images/exif-cut-short.jpg: a 16x16 JPEG whose EXIF block was cut short by two
+    # changed bytes; the pixels decode, and Pillow warned "Truncated File Read" (a stray line)
+    import warnings
+
+    data = (DATA / "exif-cut-short.jpg").read_bytes()
+    src = ImageSource(name="t", data=data, mime="image/jpeg", origin="t.jpg", digest="x")
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        rgba = decode_image(src)
+    assert rgba.shape == (16, 16, 4) and seen == []
