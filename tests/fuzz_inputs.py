@@ -12,7 +12,8 @@ built with :mod:`gltf_builder`, mutated structurally (keys deleted, values repla
 types, negatives, huge counts, NaN tokens) and at the byte level (flips, truncation); OBJ files
 generated line by line from the grammar (numbers in every form, indices in and out of range,
 junk and binary lines, groups, ``mtllib``) with an MTL file and a PNG texture beside them; PNG
-files with generated headers, chunks and (in)valid pixel streams, through
+files with generated headers, chunks and (in)valid pixel streams, and JPEG files (a small one
+with an EXIF block, its bytes changed, cut short, zeroed or repeated), through
 :func:`pipelines.texture_decode.decode_image`.
 
 Outcomes per case: ``built`` (imported with no warning), ``warning``, ``error`` (one
@@ -29,6 +30,7 @@ import argparse
 import base64
 import collections
 import copy
+import io
 import json
 import os
 import resource
@@ -119,6 +121,43 @@ def good_png() -> bytes:
     rows = b"".join(b"\x00" + b"".join(bytes([(x * 60) % 256, (y * 60) % 256, 128, 255]) for x in range(4)) for y in range(4))
     return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", 4, 4, 8, 6, 0, 0, 0)) + \
         _chunk(b"IDAT", zlib.compress(rows)) + _chunk(b"IEND", b"")
+
+
+_GOOD_JPEG: list[bytes] = []
+
+
+def good_jpeg() -> bytes:
+    """A 16x16 JPEG with an EXIF block (resolution, software, date), made once by Pillow."""
+    if not _GOOD_JPEG:
+        from PIL import Image
+
+        exif = Image.Exif()
+        exif[282], exif[283], exif[305], exif[306] = 72.0, 72.0, "assetpipe", "2026:11:26 00:00:00"
+        pixels = np.indices((16, 16, 3)).sum(axis=0).astype(np.uint8) * 8
+        buf = io.BytesIO()
+        Image.fromarray(pixels).save(buf, "JPEG", exif=exif.tobytes(), quality=90)
+        _GOOD_JPEG.append(buf.getvalue())
+    return _GOOD_JPEG[0]
+
+
+@st.composite
+def jpeg_bytes(draw) -> bytes:
+    """:func:`good_jpeg` with bytes changed (mostly in its headers), cut short, zeroed or repeated."""
+    b = bytearray(good_jpeg())
+    op = draw(st.sampled_from(["header", "header", "anywhere", "cut", "zeros", "repeat"]))
+    if op in ("header", "anywhere"):
+        end = 300 if op == "header" else len(b)
+        for pos, val in draw(st.lists(st.tuples(st.integers(2, end - 1), st.integers(0, 255)), min_size=1, max_size=8)):
+            b[pos] = val
+    elif op == "cut":
+        b = b[: draw(st.integers(0, len(b) - 1))]
+    elif op == "zeros":
+        at = draw(st.integers(0, len(b) - 1))
+        b[at:at + draw(st.integers(1, 400))] = bytes(len(b[at:at + 400]))[: len(b[at:at + 400])]
+    else:
+        at = draw(st.integers(2, len(b) - 1))
+        b = b[:at] + b[at - draw(st.integers(1, min(at, 300))):]
+    return bytes(b)
 
 
 # -- glTF -----------------------------------------------------------------------------------------
@@ -411,6 +450,15 @@ def run_png(data: bytes) -> tuple[str, str]:
     return classify(lambda: decode_image(image), Path("fuzz/t.png"))
 
 
+def run_jpeg(data: bytes) -> tuple[str, str]:
+    from assetpipe.core.hashing import digest_bytes
+    from assetpipe.pipelines.model import ImageSource
+    from assetpipe.pipelines.texture_decode import decode_image
+
+    image = ImageSource(name="t.jpg", data=data, mime="image/jpeg", origin="fuzz/t.jpg", digest=digest_bytes(data))
+    return classify(lambda: decode_image(image), Path("fuzz/t.jpg"))
+
+
 def run_build(files: dict[str, bytes], folder: Path) -> tuple[str, str]:
     """The real ``assetpipe build`` on the bad model beside a good one (in its own folder)."""
     bad = write_case(folder / "in" / "bad", files)
@@ -432,11 +480,15 @@ def run_build(files: dict[str, bytes], folder: Path) -> tuple[str, str]:
     return "build-ok", f"exit {proc.returncode}"
 
 
+#: the kinds of cases, each a share of the run
+KINDS = ("gltf", "obj", "png", "jpeg")
+
+
 def fuzz(cases: int, seed: int, builds: int, workdir: Path) -> dict:
-    """Run ``cases`` generated cases (a third each glTF, OBJ, PNG) and ``builds`` build checks."""
-    counts: dict[str, collections.Counter] = {k: collections.Counter() for k in ("gltf", "obj", "png", "build")}
+    """Run ``cases`` generated cases (a quarter each glTF, OBJ, PNG, JPEG) and ``builds`` build checks."""
+    counts: dict[str, collections.Counter] = {k: collections.Counter() for k in KINDS + ("build",)}
     failures: list[dict] = []
-    per_kind = max(1, cases // 3)
+    per_kind = max(1, cases // len(KINDS))
     build_every = max(1, (2 * per_kind) // builds) if builds else 0
     n = {"i": 0}
 
@@ -476,7 +528,14 @@ def fuzz(cases: int, seed: int, builds: int, workdir: Path) -> dict:
         outcome, detail = run_png(data)
         record("png", outcome, detail, {"t.png": data})
 
-    for fn in (gltf_cases, obj_cases, png_cases):  # @seed: the same cases for the same seed
+    @hypothesis_seed(seed)
+    @settings(**common)
+    @given(jpeg_bytes())
+    def jpeg_cases(data):
+        outcome, detail = run_jpeg(data)
+        record("jpeg", outcome, detail, {"t.jpg": data})
+
+    for fn in (gltf_cases, obj_cases, png_cases, jpeg_cases):  # @seed: the same cases for the same seed
         fn()
     return {"cases": {k: dict(v) for k, v in counts.items()}, "failures": failures}
 

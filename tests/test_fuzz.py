@@ -32,11 +32,11 @@ def test_fuzz_ci_run_has_no_internal_error_hang_or_memory_blow_up(tmp_path: Path
     counts = result["cases"]
     print(proc.stdout)
     # every case was run and ended in one of the expected outcomes
-    assert sum(sum(counts[k].values()) for k in ("gltf", "obj", "png")) == cases
+    assert sum(sum(counts[k].values()) for k in ("gltf", "obj", "png", "jpeg")) == cases
     assert counts["build"] == {"build-ok": builds}, result["failures"]
     assert not result["failures"], "\n".join(f"{f['kind']} {f['outcome']}: {f['detail']}" for f in result["failures"])
     assert proc.returncode == 0
     # the generators reach past the first check: some inputs of every kind build, and glTF/OBJ
     # produce warnings too (a generator that only made garbage would test one error path)
-    for kind in ("gltf", "obj", "png"):
+    for kind in ("gltf", "obj", "png", "jpeg"):
         assert counts[kind].get("built", 0) + counts[kind].get("warning", 0) > 0, counts
