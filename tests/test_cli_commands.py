@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from click.testing import CliRunner
 
-from renderer.cli_commands import preview, validate
+from assetpipe.renderer.cli_commands import preview, validate
 
 
 @pytest.mark.parametrize("command, args, message", [
