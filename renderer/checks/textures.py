@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..loader import material_list_path, sidecar_path
+from ..loader import material_list_path, sidecar_path, sidecar_problem
 from ..results import CheckResult, ValidateOptions
 from .base import Check, Context
 from .images import decode_rgba
@@ -241,11 +241,18 @@ class TexturesCheck(Check):
         root = Path(model_json).parent
         try:
             side = json.loads(sidecar_path(model_json).read_text())
-            seed_mats = {m.get("id"): m for m in json.loads(material_list_path(model_json).read_text())}
+            mats = json.loads(material_list_path(model_json).read_text())
+            problem = sidecar_problem(side)
+            if problem is None and not (isinstance(mats, list) and all(
+                    isinstance(m, dict) and isinstance(m.get("id"), str) for m in mats)):
+                problem = "the material list is not a list of objects with an id"
+            if problem:
+                raise ValueError(problem)
         except (OSError, ValueError) as exc:
             r.worst("unreadable", 1, 0)
             r.messages.append(f"cannot read the material files: {exc}")
             return r.finish()
+        seed_mats = {m["id"]: m for m in mats}
         figures: dict[str, Any] = {}
         seen: dict[str, tuple[dict[str, Any], list[str]]] = {}
         count = 0
