@@ -163,6 +163,16 @@ def _extensions(where: str, obj: dict) -> tuple[dict, str | None]:
     return exts, None
 
 
+def _extension(where: str, exts: dict, name: str) -> tuple[dict | None, str, str | None]:
+    """Extension ``name`` of ``exts`` (None: absent), its path for messages, and the problem
+    with it (it must be an object)."""
+    ext = exts.get(name)
+    sub = f"{where}.extensions.{name}"
+    if ext is not None and not isinstance(ext, dict):
+        return None, sub, f"{sub} is not an object"
+    return ext, sub, None
+
+
 def _check_texture_info(where: str, info: Any) -> str | None:
     """A material's texture reference (glTF textureInfo): an object whose ``index`` is a texture
     index; ``texCoord`` a set number, ``scale``/``strength`` numbers; KHR_texture_transform's
@@ -179,14 +189,11 @@ def _check_texture_info(where: str, info: Any) -> str | None:
     exts, problem = _extensions(where, info)
     if problem:
         return problem
-    tt = exts.get("KHR_texture_transform")
-    if tt is not None:
-        sub = f"{where}.extensions.KHR_texture_transform"
-        if not isinstance(tt, dict):
-            return f"{sub} is not an object"
-        return _check_fields(sub, tt, numbers=("rotation",), vectors=(("offset", 2), ("scale", 2)),
-                             indices=("texCoord",))
-    return None
+    tt, sub, problem = _extension(where, exts, "KHR_texture_transform")
+    if problem or tt is None:
+        return problem
+    return _check_fields(sub, tt, numbers=("rotation",), vectors=(("offset", 2), ("scale", 2)),
+                         indices=("texCoord",))
 
 
 def _check_material(i: int, mat: dict) -> str | None:
@@ -211,30 +218,23 @@ def _check_material(i: int, mat: dict) -> str | None:
     exts, problem = _extensions(where, mat)
     if problem:
         return problem
-    sg = exts.get("KHR_materials_pbrSpecularGlossiness")
-    if sg is not None:
-        sub = f"{where}.extensions.KHR_materials_pbrSpecularGlossiness"
-        if not isinstance(sg, dict):
-            return f"{sub} is not an object"
-        problem = _check_fields(sub, sg, numbers=("glossinessFactor",),
-                                vectors=(("diffuseFactor", 4), ("specularFactor", 3)))
-        for key in ("diffuseTexture", "specularGlossinessTexture"):
-            problem = problem or _check_texture_info(f"{sub}.{key}", sg.get(key))
-        if problem:
-            return problem
-    return None
+    sg, sub, problem = _extension(where, exts, "KHR_materials_pbrSpecularGlossiness")
+    if problem or sg is None:
+        return problem
+    problem = _check_fields(sub, sg, numbers=("glossinessFactor",),
+                            vectors=(("diffuseFactor", 4), ("specularFactor", 3)))
+    for key in ("diffuseTexture", "specularGlossinessTexture"):
+        problem = problem or _check_texture_info(f"{sub}.{key}", sg.get(key))
+    return problem
 
 
 def _check_draco(where: str, prim: dict) -> str | None:
     exts, problem = _extensions(where, prim)
     if problem:
         return problem
-    draco = exts.get("KHR_draco_mesh_compression")
-    if draco is None:
-        return None
-    sub = f"{where}.extensions.KHR_draco_mesh_compression"
-    if not isinstance(draco, dict):
-        return f"{sub} is not an object"
+    draco, sub, problem = _extension(where, exts, "KHR_draco_mesh_compression")
+    if problem or draco is None:
+        return problem
     if not _index_ok(draco.get("bufferView")):
         return f"{sub}.bufferView is missing or not a buffer view index"
     attributes = draco.get("attributes")

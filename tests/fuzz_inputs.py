@@ -54,6 +54,7 @@ from hypothesis import strategies as st  # noqa: E402
 
 from assetpipe.core.errors import AssetError  # noqa: E402
 from gltf_builder import GltfBuilder  # noqa: E402
+from json_edits import value_paths  # noqa: E402
 
 FAILURES = ("internal", "timeout", "memory", "pywarning")
 CASE_SECONDS = 20  # a case's time limit (every legitimate case here takes well under a second)
@@ -218,22 +219,10 @@ _VALUES = st.sampled_from([None, -1, 0, 1, 3, 7, 2 ** 31, 2 ** 64, 10 ** 9, 30_0
                            "data:application/octet-stream;base64,@@", "file:///etc/passwd", "../x.bin"])
 
 
-def _paths(doc, prefix=()):
-    """Every (container, key) path in a JSON document, depth-first."""
-    if isinstance(doc, dict):
-        for k, v in doc.items():
-            yield prefix + (k,)
-            yield from _paths(v, prefix + (k,))
-    elif isinstance(doc, list):
-        for i, v in enumerate(doc):
-            yield prefix + (i,)
-            yield from _paths(v, prefix + (i,))
-
-
 def _mutate_doc(draw, doc: dict) -> dict:
     doc = copy.deepcopy(doc)
     for _ in range(draw(st.integers(1, 4))):
-        paths = [p for p in _paths(doc) if p and p[0] != "asset"]
+        paths = [p for p in value_paths(doc) if p and p[0] != "asset"]
         if not paths:
             break
         path = paths[draw(st.integers(0, len(paths) - 1))]

@@ -6,7 +6,6 @@ KHR_texture_transform offset, a list among morph weights (each an internal error
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
@@ -14,20 +13,12 @@ import pytest
 
 from assetpipe.core.errors import AssetError
 from assetpipe.pipelines.import_gltf import import_gltf
-from tests.fuzz_inputs import SEED_KINDS, _paths, _seed_gltf
+from tests.fuzz_inputs import SEED_KINDS, _seed_gltf
+from tests.json_edits import value_paths, with_value
 
 # one of each JSON type the schema does not expect somewhere (large numbers, which can ask for
 # large allocations, are left to the fuzzer's memory-limited subprocess)
 OTHERS = ("x", -1, 1.5, True, None, [], [1], {"a": 1})
-
-
-def _edited(doc: dict, path: tuple, value) -> dict:
-    out = copy.deepcopy(doc)
-    parent = out
-    for key in path[:-1]:
-        parent = parent[key]
-    parent[path[-1]] = copy.deepcopy(value)
-    return out
 
 
 @pytest.mark.parametrize("kind", range(SEED_KINDS))
@@ -39,9 +30,9 @@ def test_every_value_of_the_wrong_type_is_read_or_refused_in_one_line(tmp_path: 
     model.write_text(json.dumps(doc))
     import_gltf(model)  # the document itself is sound
     failures, refused = [], 0
-    for path in [p for p in _paths(doc) if p[0] != "asset"]:
+    for path in [p for p in value_paths(doc) if p[0] != "asset"]:
         for value in OTHERS:
-            model.write_text(json.dumps(_edited(doc, path, value)))
+            model.write_text(json.dumps(with_value(doc, path, value)))
             try:
                 import_gltf(model)
             except AssetError as exc:

@@ -12,6 +12,7 @@ import pytest
 from assetpipe.format import OutputLod, OutputMaterial, OutputMesh, encode_model
 from assetpipe.inspect import check_model, summarize
 from assetpipe.pipelines.mesh_options import ATTRIBUTE_COMPONENTS
+from tests.json_edits import value_paths, with_value
 
 
 def _build(out: Path) -> Path:
@@ -200,17 +201,6 @@ def test_lod_index_beyond_its_vertex_count_prefix(model):
     _one(check_model(model), "mesh mesh-1-0 LOD1")
 
 
-def _value_paths(doc, prefix=()):
-    if isinstance(doc, dict):
-        for k, v in doc.items():
-            yield prefix + (k,)
-            yield from _value_paths(v, prefix + (k,))
-    elif isinstance(doc, list):
-        for i, v in enumerate(doc[:3]):
-            yield prefix + (i,)
-            yield from _value_paths(v, prefix + (i,))
-
-
 @pytest.mark.parametrize("name", ["M.json", "M-mat.json", "M.asset.json"])
 def test_any_value_of_another_type_is_a_problem_not_a_crash(tmp_path, name):
     # (a sidecar without its vertexLayout, an ID-mat.json where ID.json belongs, ... were
@@ -223,14 +213,9 @@ def test_any_value_of_another_type_is_a_problem_not_a_crash(tmp_path, name):
     _build(tmp_path)
     path = tmp_path / name
     doc = json.loads(path.read_text())
-    for where in list(_value_paths(doc)):
+    for where in list(value_paths(doc, first=3)):
         for value in ("x", -1, None, [], {"a": 1}):
-            edited = json.loads(json.dumps(doc))
-            parent = edited
-            for key in where[:-1]:
-                parent = parent[key]
-            parent[where[-1]] = value
-            path.write_text(json.dumps(edited))
+            path.write_text(json.dumps(with_value(doc, where, value)))
             r = runner.invoke(main, ["inspect", str(tmp_path / "M.json")])
             assert r.exit_code in (0, 1) and (r.exception is None or isinstance(r.exception, SystemExit)), \
                 (where, value, r.output, r.exception)

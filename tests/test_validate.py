@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import importlib.util
 import dataclasses
+import importlib.util
 import json
 import shutil
 import xml.etree.ElementTree as ET
@@ -16,6 +16,7 @@ from assetpipe.renderer.reports import write_json_report, write_junit_report
 from assetpipe.renderer.session import shared_renderer
 from assetpipe.renderer.batch import validate_batch, validate_model
 from assetpipe.renderer.validate import ValidateOptions, ValidationResult
+from tests.json_edits import value_paths, with_value
 
 pytestmark = pytest.mark.vulkan
 BUILT = Path(__file__).parent / "data" / "built"
@@ -497,17 +498,6 @@ def test_triangle_fans_are_compared_with_their_source(tmp_path: Path, indexed: b
     assert r.check("source").status == "fail"
 
 
-def _value_paths(doc, prefix=()):
-    if isinstance(doc, dict):
-        for k, v in doc.items():
-            yield prefix + (k,)
-            yield from _value_paths(v, prefix + (k,))
-    elif isinstance(doc, list):
-        for i, v in enumerate(doc[:2]):
-            yield prefix + (i,)
-            yield from _value_paths(v, prefix + (i,))
-
-
 @pytest.mark.parametrize("name", ["cube.json", "cube-mat.json", "cube.asset.json"])
 def test_a_value_of_another_shape_fails_a_check_and_never_raises(cube: Path, name: str) -> None:
     # every value of the three JSON files replaced in turn by "x", null or []: each run ends in a
@@ -517,14 +507,9 @@ def test_a_value_of_another_shape_fails_a_check_and_never_raises(cube: Path, nam
     path = cube.parent / name
     doc = json.loads(path.read_text())
     failed = 0
-    for where in list(_value_paths(doc)):
+    for where in list(value_paths(doc, first=2)):
         for value in ("x", None, []):
-            edited = json.loads(json.dumps(doc))
-            parent = edited
-            for key in where[:-1]:
-                parent = parent[key]
-            parent[where[-1]] = value
-            path.write_text(json.dumps(edited))
+            path.write_text(json.dumps(with_value(doc, where, value)))
             r = validate_model(cube, dataclasses.replace(OPTS, width=32, height=32, supersample=1), isolate=False)
             failed += not r.passed
     assert failed > 0  # the edits reach the checks
