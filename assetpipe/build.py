@@ -108,7 +108,11 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session
 
     stat = StatCache(store.root / "stat-cache.json")
     state = OutputState(out_dir)
-    results: list[AssetResult] = []
+    # a file name that is not UTF-8 cannot go into the build's JSON (its records, state and
+    # outputs): that model fails with a line saying so, the others build (it failed every model of
+    # the build before, each with a UnicodeEncodeError)
+    sources, unnamed = _split_unnamed(sources)
+    results: list[AssetResult] = list(unnamed)
     scene_run = None
     if scene_paths:
         from assetpipe.scene_build import SceneRun
@@ -126,6 +130,8 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session
     todo: list[AssetSpec] = []
     why: dict[str, str] = {}
     total = len(specs)
+    for r in unnamed if on_result else ():
+        on_result(r, 0, total)
     for spec in specs:
         reason = state.check_entry(spec.key, spec.id, spec.options_digest, stat)
         if reason is None:
@@ -162,6 +168,22 @@ def _run_locked(t0, sources, scene_paths, out_dir, options, jobs, store, session
     store.end_build(session, out_dir, time.perf_counter() - t0)
     return BuildReport(results=results, seconds=time.perf_counter() - t0, removed=removed,
                        cache_dropped=list(store.dropped))
+
+
+def _split_unnamed(sources: list[Path]) -> tuple[list[Path], list[AssetResult]]:
+    """(the sources whose path is UTF-8 text, a failed result for each other one)."""
+    named, failed = [], []
+    for src in sources:
+        try:
+            str(src).encode("utf-8")
+        except UnicodeEncodeError:
+            shown = os.fsencode(src).decode("utf-8", "backslashreplace")  # the bytes that are not: \xff
+            failed.append(AssetResult(source=shown, id="", status="failed",
+                                      error=f"{shown}: the file name is not valid UTF-8 (rename the file): "
+                                            "it cannot be written into the build's records and outputs"))
+        else:
+            named.append(src)
+    return named, failed
 
 
 def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_result, total, limits,

@@ -19,9 +19,14 @@ def _suffix(name: str) -> str:
 
 def _walk(folder: Path) -> list[Path]:
     """Model files under ``folder``, recursively, in sorted order. One scandir per folder and
-    no stat per file (the directory entry's type says whether it is a file)."""
+    no stat per file (the directory entry's type says whether it is a file). A folder reached
+    again (a link to a folder above it, two links to one folder) is walked once: a link to its
+    own folder made the walk go 40 links deep and fail (two such links: 2^40 paths); an entry
+    that cannot be examined is left out, as an unreadable folder is."""
     out: list[str] = []
-    stack = [os.fspath(folder)]
+    top = os.fspath(folder)
+    seen = {_folder_key(top)}
+    stack = [top]
     while stack:
         d = stack.pop()
         try:
@@ -29,12 +34,24 @@ def _walk(folder: Path) -> list[Path]:
         except OSError:
             continue
         for e in entries:
-            if e.is_dir():
-                stack.append(e.path)
-            elif _suffix(e.name) in MODEL_SUFFIXES and e.is_file():
-                out.append(e.path)
+            try:
+                if e.is_dir():
+                    key = _folder_key(e.path)
+                    if key not in seen:
+                        seen.add(key)
+                        stack.append(e.path)
+                elif _suffix(e.name) in MODEL_SUFFIXES and e.is_file():
+                    out.append(e.path)
+            except OSError:
+                continue
     out.sort(key=lambda f: f.split(os.sep))
     return [Path(f) for f in out]
+
+
+def _folder_key(path: str) -> tuple[int, int]:
+    """(device, inode) of the folder ``path`` names, through links."""
+    st = os.stat(path)
+    return st.st_dev, st.st_ino
 
 
 def discover_inputs(inputs: list[str | Path]) -> list[Path]:

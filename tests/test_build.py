@@ -4,6 +4,7 @@ determinism, and failure isolation."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -434,3 +435,23 @@ def test_a_texture_on_a_uv_set_the_layout_lacks_is_named_in_the_warnings(tmp_pat
         # multiuv: its base colour is on TEXCOORD_1, so uv0 holds that set: nothing missing
         assert not any("TEXCOORD" in w for a, rep in report.items() if a.endswith("multiuv")
                        for w in rep["warnings"])
+
+
+def test_a_file_name_that_is_not_utf8_fails_alone(tmp_path):
+    # it went into the build graph's JSON and failed every model of the build (UnicodeEncodeError)
+    art = tmp_path / "art"
+    art.mkdir()
+    tri = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+    (art / "good.obj").write_bytes(tri)
+    bad = os.path.join(os.fsencode(art), b"bad\xffname.obj")
+    with open(bad, "wb") as f:
+        f.write(tri)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["build", str(art), "-o", str(out), "--cache", str(tmp_path / "c"), "-j", "1",
+                                  "--json", str(tmp_path / "r.json")])
+    assert r.exit_code == 1, r.output
+    report = json.loads((tmp_path / "r.json").read_text())
+    by_status = {a["status"]: a for a in report["assets"]}
+    assert by_status["built"]["id"] == "good" and (out / "good.json").is_file()
+    assert "bad\\xffname.obj: the file name is not valid UTF-8" in by_status["failed"]["error"]
+    assert "bad\\xffname.obj: the file name is not valid UTF-8" in r.output

@@ -148,3 +148,14 @@ def test_ids_are_safe_file_names_even_for_dot_names(tmp_path):
     assert ids[srcs[2]] == "hidden" and ids[srcs[3]] == "x" and ids[srcs[4]] == "a..b"
     # a path separator in a stem cannot reach an id either
     assert "/" not in "".join(assign_ids([tmp_path / "a" / "b.obj"]).values())
+
+
+def test_discovery_walks_a_folder_reached_again_once(tmp_path):
+    # a link to its own folder and a link to the folder above: the walk went 40 links deep and
+    # raised ELOOP (with two such links it would have walked 2^40 paths)
+    _touch(tmp_path, "art/a.obj", "art/sub/b.gltf")
+    os.symlink(".", tmp_path / "art" / "again")
+    os.symlink("..", tmp_path / "art" / "sub" / "up")
+    os.symlink("/nonexistent-assetpipe", tmp_path / "art" / "dangling.obj")
+    found = discover_inputs([tmp_path / "art"])
+    assert [p.relative_to(tmp_path).as_posix() for p in found] == ["art/a.obj", "art/sub/b.gltf"]
