@@ -36,9 +36,28 @@ def confined_rel(rel) -> bool:
     return all(part not in ("", ".", "..") for part in parts)
 
 
+def _output_ok(value) -> bool:
+    """An output's record: [blob digest, size, mtime_ns]."""
+    return (isinstance(value, list) and len(value) == 3 and isinstance(value[0], str)
+            and all(isinstance(x, int) and not isinstance(x, bool) for x in value[1:]))
+
+
+def _strings(value) -> bool:
+    return isinstance(value, list) and all(isinstance(x, str) for x in value)
+
+
 def _entry_ok(entry) -> bool:
+    """An entry of the shape a build writes, every output inside OUT (a value of another type
+    raised from the no-op check or the report and failed the whole build)."""
     return (isinstance(entry, dict) and isinstance(entry.get("outputs"), dict)
-            and isinstance(entry.get("inputs"), dict) and all(confined_rel(rel) for rel in entry["outputs"]))
+            and isinstance(entry.get("inputs"), dict)
+            and all(confined_rel(rel) and _output_ok(v) for rel, v in entry["outputs"].items())
+            and all(isinstance(d, str) for d in entry["inputs"].values())
+            and isinstance(entry.get("id"), str) and isinstance(entry.get("options"), str)
+            and _strings(entry.get("warnings", [])) and _strings(entry.get("skipped", []))
+            and isinstance(entry.get("stats", {}), dict)
+            and (entry.get("scenes") is None or _strings(entry["scenes"]))
+            and isinstance(entry.get("source", ""), str))
 
 
 class OutputState:

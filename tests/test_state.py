@@ -320,3 +320,26 @@ def test_stale_output_behind_a_link_out_of_out_is_not_deleted(env):
     assert state.forget_missing_sources() == ["A"]
     assert state.delete_unowned_outputs() == []
     assert (outside / "A.json").read_bytes() == b"precious"
+
+
+def test_an_entry_of_another_shape_is_dropped_and_its_source_rebuilds(env):
+    # every value of a saved state replaced in turn by "x", -1, null, [] or {}: the state loads,
+    # the no-op check answers (an entry of another shape is dropped: "new"), nothing raises (an
+    # output record that was a string failed the whole build on unpacking; a number for the
+    # warnings, on the report); a sound entry still checks up to date
+    from tests.json_edits import value_paths, with_value
+
+    src, _, state = _built(env)
+    assert _check(state, src) is None
+    doc = json.loads(state.path.read_text())
+    outcomes = set()
+    for where in value_paths(doc):
+        for value in ("x", -1, None, [], {}):
+            state.path.write_text(json.dumps(with_value(doc, where, value)))
+            loaded = OutputState(env.out)
+            for key, entry in loaded.assets.items():
+                list(entry.get("warnings", [])), list(entry.get("skipped", []))  # what a cached result reads
+            outcomes.add(_check(loaded, src))
+            loaded.delete_unowned_outputs()
+            assert (env.out / "A.json").is_file()  # a damaged state never costs a good output
+    assert "new" in outcomes and None in outcomes
