@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assetpipe.core.sidecar_shape import sidecar_problem
 from assetpipe.format import SEED_MATERIAL_KEYS, SEED_MESH_KEYS, SEED_MODEL_KEYS
 
 
@@ -31,8 +32,9 @@ def _load(model_json: Path):
         raise ValueError(f"{mid}-mat.json is not a list of materials")
     side_path = base / f"{mid}.asset.json"
     side = json.loads(side_path.read_text(encoding="utf-8")) if side_path.exists() else None
-    if side is not None and not isinstance(side, dict):
-        raise ValueError(f"{mid}.asset.json is not an object")
+    problem = None if side is None else sidecar_problem(side)
+    if problem:
+        raise ValueError(f"{mid}.asset.json: {problem}")
     return model, mats, side
 
 

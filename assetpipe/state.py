@@ -17,6 +17,7 @@ from pathlib import Path
 
 from assetpipe.core.errors import ConfigError
 from assetpipe.core.hashing import digest_file
+from assetpipe.core.json_shape import is_int, strings
 from assetpipe.core.state_file import read_json_dict as _read_json
 from assetpipe.core.state_file import source_of  # noqa: F401 (re-exported)
 from assetpipe.core.writer import STATE_DIR, tmp_dir, write_atomic
@@ -38,12 +39,7 @@ def confined_rel(rel) -> bool:
 
 def _output_ok(value) -> bool:
     """An output's record: [blob digest, size, mtime_ns]."""
-    return (isinstance(value, list) and len(value) == 3 and isinstance(value[0], str)
-            and all(isinstance(x, int) and not isinstance(x, bool) for x in value[1:]))
-
-
-def _strings(value) -> bool:
-    return isinstance(value, list) and all(isinstance(x, str) for x in value)
+    return isinstance(value, list) and len(value) == 3 and isinstance(value[0], str) and all(map(is_int, value[1:]))
 
 
 def _entry_ok(entry) -> bool:
@@ -54,9 +50,9 @@ def _entry_ok(entry) -> bool:
             and all(confined_rel(rel) and _output_ok(v) for rel, v in entry["outputs"].items())
             and all(isinstance(d, str) for d in entry["inputs"].values())
             and isinstance(entry.get("id"), str) and isinstance(entry.get("options"), str)
-            and _strings(entry.get("warnings", [])) and _strings(entry.get("skipped", []))
+            and strings(entry.get("warnings", [])) and strings(entry.get("skipped", []))
             and isinstance(entry.get("stats", {}), dict)
-            and (entry.get("scenes") is None or _strings(entry["scenes"]))
+            and (entry.get("scenes") is None or strings(entry["scenes"]))
             and isinstance(entry.get("source", ""), str))
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from assetpipe.core.json_shape import fields_problem, is_index, is_number, numbers
+
 RAW_KEYS = frozenset({"extensions", "extras"})
 
 
@@ -106,12 +108,7 @@ def load_json(text: str) -> Any:
 
 
 def _ints_ok(value: Any) -> bool:
-    return isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in value)
-
-
-def _numbers_ok(value: Any, length: int) -> bool:
-    return isinstance(value, list) and len(value) == length and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    return isinstance(value, list) and all(is_index(v) for v in value)
 
 
 def _check_sparse(i: int, sparse: dict) -> str | None:
@@ -127,29 +124,6 @@ def _check_sparse(i: int, sparse: dict) -> str | None:
             if (v is None and key == "byteOffset") or (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
                 continue
             return f"accessors[{i}].sparse.{part}.{key} is missing or not a non-negative integer"
-    return None
-
-
-def _index_ok(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
-
-
-def _number_ok(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _check_fields(where: str, obj: dict, numbers=(), vectors=(), indices=()) -> str | None:
-    """Optional fields of ``obj``: ``numbers`` (names), ``vectors`` ((name, length)),
-    ``indices`` (names: non-negative integers)."""
-    for key in numbers:
-        if obj.get(key) is not None and not _number_ok(obj[key]):
-            return f"{where}.{key} is not a number"
-    for key, length in vectors:
-        if obj.get(key) is not None and not _numbers_ok(obj[key], length):
-            return f"{where}.{key} is not {length} numbers"
-    for key in indices:
-        if obj.get(key) is not None and not _index_ok(obj[key]):
-            return f"{where}.{key} is not a non-negative integer"
     return None
 
 
@@ -181,9 +155,9 @@ def _check_texture_info(where: str, info: Any) -> str | None:
         return None
     if not isinstance(info, dict):
         return f"{where} is not a texture reference (an object with an 'index')"
-    if not _index_ok(info.get("index")):
+    if not is_index(info.get("index")):
         return f"{where}.index is missing or not a texture index"
-    problem = _check_fields(where, info, numbers=("scale", "strength"), indices=("texCoord",))
+    problem = fields_problem(where, info, nums=("scale", "strength"), indices=("texCoord",))
     if problem:
         return problem
     exts, problem = _extensions(where, info)
@@ -192,7 +166,7 @@ def _check_texture_info(where: str, info: Any) -> str | None:
     tt, sub, problem = _extension(where, exts, "KHR_texture_transform")
     if problem or tt is None:
         return problem
-    return _check_fields(sub, tt, numbers=("rotation",), vectors=(("offset", 2), ("scale", 2)),
+    return fields_problem(sub, tt, nums=("rotation",), vectors=(("offset", 2), ("scale", 2)),
                          indices=("texCoord",))
 
 
@@ -202,7 +176,7 @@ def _check_material(i: int, mat: dict) -> str | None:
     pbr = mat.get("pbrMetallicRoughness")
     if pbr is not None:
         sub = f"{where}.pbrMetallicRoughness"
-        problem = _check_fields(sub, pbr, numbers=("metallicFactor", "roughnessFactor"),
+        problem = fields_problem(sub, pbr, nums=("metallicFactor", "roughnessFactor"),
                                 vectors=(("baseColorFactor", 4),))
         for key in ("baseColorTexture", "metallicRoughnessTexture"):
             problem = problem or _check_texture_info(f"{sub}.{key}", pbr.get(key))
@@ -212,7 +186,7 @@ def _check_material(i: int, mat: dict) -> str | None:
         problem = _check_texture_info(f"{where}.{key}", mat.get(key))
         if problem:
             return problem
-    problem = _check_fields(where, mat, vectors=(("emissiveFactor", 3),))
+    problem = fields_problem(where, mat, vectors=(("emissiveFactor", 3),))
     if problem:
         return problem
     exts, problem = _extensions(where, mat)
@@ -221,7 +195,7 @@ def _check_material(i: int, mat: dict) -> str | None:
     sg, sub, problem = _extension(where, exts, "KHR_materials_pbrSpecularGlossiness")
     if problem or sg is None:
         return problem
-    problem = _check_fields(sub, sg, numbers=("glossinessFactor",),
+    problem = fields_problem(sub, sg, nums=("glossinessFactor",),
                             vectors=(("diffuseFactor", 4), ("specularFactor", 3)))
     for key in ("diffuseTexture", "specularGlossinessTexture"):
         problem = problem or _check_texture_info(f"{sub}.{key}", sg.get(key))
@@ -235,10 +209,10 @@ def _check_draco(where: str, prim: dict) -> str | None:
     draco, sub, problem = _extension(where, exts, "KHR_draco_mesh_compression")
     if problem or draco is None:
         return problem
-    if not _index_ok(draco.get("bufferView")):
+    if not is_index(draco.get("bufferView")):
         return f"{sub}.bufferView is missing or not a buffer view index"
     attributes = draco.get("attributes")
-    if not isinstance(attributes, dict) or not all(_index_ok(v) for v in attributes.values()):
+    if not isinstance(attributes, dict) or not all(is_index(v) for v in attributes.values()):
         return f"{sub}.attributes is not an object of attribute ids"
     return None
 
@@ -281,7 +255,7 @@ def check_structure(doc: dict) -> str | None:
                 if item.get("children") is not None and not _ints_ok(item["children"]):
                     return f"nodes[{i}].children is not a list of node indices"
                 for key, length in _NODE_VECTORS.items():
-                    if item.get(key) is not None and not _numbers_ok(item[key], length):
+                    if item.get(key) is not None and not numbers(item[key], length):
                         return f"nodes[{i}].{key} is not {length} numbers"
             if array == "materials":
                 problem = _check_material(i, item)
@@ -291,12 +265,12 @@ def check_structure(doc: dict) -> str | None:
                 exts, problem = _extensions(f"{array}[{i}]", item)
                 # a texture's image may come from an extension (KHR_texture_basisu, EXT_texture_webp)
                 for name, ext in exts.items() if array == "textures" else ():
-                    if isinstance(ext, dict) and ext.get("source") is not None and not _index_ok(ext["source"]):
+                    if isinstance(ext, dict) and ext.get("source") is not None and not is_index(ext["source"]):
                         problem = problem or f"textures[{i}].extensions.{name}.source is not an image index"
                 if problem:
                     return problem
             if array in ("meshes", "nodes") and item.get("weights") is not None and not all(
-                    _number_ok(w) for w in item["weights"]):
+                    is_number(w) for w in item["weights"]):
                 return f"{array}[{i}].weights is not a list of numbers"
             if array == "scenes" and item.get("nodes") is not None and not _ints_ok(item["nodes"]):
                 return f"scenes[{i}].nodes is not a list of node indices"

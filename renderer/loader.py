@@ -28,6 +28,7 @@ import numpy as np
 
 from assetpipe.core.errors import (
     AssetError, AssetpipeError, InvalidGeometryError, InvalidTextureError, MissingFileError)
+from assetpipe.core.sidecar_shape import sidecar_problem
 
 VK_FORMAT_R8G8B8A8_UNORM = 37
 VK_FORMAT_R8G8B8A8_SRGB = 43
@@ -207,115 +208,6 @@ def frame_origin(side: dict[str, Any] | None) -> np.ndarray:
     if not (np.isfinite(c).all() and math.isfinite(r)) or float(np.abs(c).max()) <= FAR_RADII * max(r, 1e-30):
         return np.zeros(3)
     return c.astype(np.float32).astype(np.float64)
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _numbers(v: Any, n: int | None = None, nulls: bool = False) -> bool:
-    return isinstance(v, list) and (n is None or len(v) == n) and all(
-        _is_num(x) or (nulls and x is None) for x in v)
-
-
-def _bounds_problem(b: Any, where: str) -> str | None:
-    if not isinstance(b, dict):
-        return f"{where} is not an object"
-    for key in ("min", "max", "center"):
-        if b.get(key) is not None and not _numbers(b[key], 3):
-            return f"{where}.{key} is not 3 numbers"
-    if b.get("radius") is not None and not _is_num(b["radius"]):
-        return f"{where}.radius is not a number"
-    return None
-
-
-def _objects(v: Any) -> bool:
-    return isinstance(v, list) and all(isinstance(x, dict) for x in v)
-
-
-def _fields_problem(obj: dict, where: str, ints=(), nums=(), strs=()) -> str | None:
-    """Keys of ``obj`` that must have a type when present (null: absent)."""
-    for keys, ok, what in ((ints, _is_int, "an integer"), (nums, _is_num, "a number"),
-                           (strs, lambda v: isinstance(v, str), "a string")):
-        for key in keys:
-            if obj.get(key) is not None and not ok(obj[key]):
-                return f"{where}.{key} is not {what}"
-    return None
-
-
-def sidecar_problem(side: Any) -> str | None:
-    """What in a sidecar (``ID.asset.json``) has another shape than docs/FORMAT.md gives it, as
-    far as the loader and the checks read it; None when nothing does."""
-    if not isinstance(side, dict):
-        return "not a JSON object"
-    vl = side.get("vertexLayout")
-    if vl is not None:
-        if not isinstance(vl, dict) or not _is_int(vl.get("stride")) or not _objects(vl.get("attributes")):
-            return "vertexLayout is not an object with a stride and a list of attributes"
-        for i, a in enumerate(vl["attributes"]):
-            problem = _fields_problem(a, f"vertexLayout.attributes[{i}]", ints=("offset",), strs=("name", "format"))
-            if problem:
-                return problem
-    if side.get("bounds") is not None:
-        problem = _bounds_problem(side["bounds"], "bounds")
-        if problem:
-            return problem
-    # (positionOffset: the loader's own check names it; frame_origin reads any value)
-    for key in ("meshes", "materials", "sources"):
-        if key in side and not _objects(side[key]):
-            return f"{key} is not a list of objects"
-    for i, m in enumerate(side.get("meshes") or []):
-        where = f"meshes[{i}]"
-        problem = _fields_problem(m, where, ints=("vertexCount", "triangleCount"), strs=("id", "name", "materialId"))
-        if problem is None and m.get("bounds") is not None:
-            problem = _bounds_problem(m["bounds"], f"{where}.bounds")
-        if problem is None and m.get("lods") is not None and not _objects(m["lods"]):
-            problem = f"{where}.lods is not a list of objects"
-        for k, lod in enumerate(m.get("lods") or [] if problem is None else []):
-            w = f"{where}.lods[{k}]"
-            problem = problem or _fields_problem(
-                lod, w, ints=("level", "idxOffset", "idxSize", "triangles", "vertexCount", "vertexStart"),
-                nums=("switchDistance",))
-            err = lod.get("error")
-            if problem is None and err is not None and (not isinstance(err, dict) or not all(
-                    v is None or _is_num(v) or isinstance(v, bool) for v in err.values())):
-                problem = f"{w}.error is not an object of numbers"
-        if problem:
-            return problem
-    for i, mat in enumerate(side.get("materials") or []):
-        where = f"materials[{i}]"
-        problem = _fields_problem(mat, where, nums=("alphaCutoff",), strs=("id", "name", "alphaMode"))
-        if problem is None and mat.get("baseColorFactor") is not None and not _numbers(mat["baseColorFactor"]):
-            problem = f"{where}.baseColorFactor is not a list of numbers"
-        textures = mat.get("textures")
-        if problem is None and textures is not None and (
-                not isinstance(textures, dict) or not all(isinstance(t, dict) for t in textures.values())):
-            problem = f"{where}.textures is not an object of textures"
-        for role, t in (textures or {}).items() if problem is None else ():
-            w = f"{where}.textures.{role}"
-            problem = problem or _fields_problem(t, w, ints=("width", "height", "levels", "vkFormat", "texCoord"),
-                                                 strs=("path", "ktx2", "colorSpace", "source"))
-            for key in ("width", "height", "levels", "vkFormat"):  # what the texture is read by
-                if problem is None and key in t and t[key] is None:
-                    problem = f"{w}.{key} is null"
-            sampler = t.get("sampler")
-            if problem is None and sampler is not None and (
-                    not isinstance(sampler, dict) or not all(v is None or _is_int(v) for v in sampler.values())):
-                problem = f"{w}.sampler is not an object of integers"
-            for key in ("meanDrift", "coverage"):
-                if problem is None and t.get(key) is not None and not _numbers(t[key], nulls=True):
-                    problem = f"{w}.{key} is not a list of numbers"
-        if problem:
-            return problem
-    for i, src in enumerate(side.get("sources") or []):
-        problem = _fields_problem(src, f"sources[{i}]", strs=("path", "digest"))
-        if problem:
-            return problem
-    return None
 
 
 def read_sidecar(model_json: Path) -> dict[str, Any] | None:

@@ -17,7 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ..loader import material_list_path, sidecar_path, sidecar_problem
+from assetpipe.core.sidecar_shape import sidecar_problem
+
+from ..loader import material_list_path, sidecar_path
 from ..results import CheckResult, ValidateOptions
 from .base import Check, Context
 from .images import decode_rgba
