@@ -63,11 +63,12 @@ def keep_freed_memory() -> bool:
 
     By default glibc maps every block over 128 kB-32 MB afresh and unmaps it when freed, so
     each large numpy temporary (a decoded texture, a mip level, a bound's cell arrays) costs
-    the kernel a page fault per 4 kB page zeroed again. A cold build of the corpus took about
-    470k page faults and 2.1-2.2 s of system time that way; kept on the heap (blocks up to
-    :data:`MMAP_THRESHOLD`, trimmed beyond :data:`TRIM_THRESHOLD`), about 280k and 1.8 s, the
-    texture tasks' faults 177k -> 41k (same peak memory, 443-456 MB). Results do not depend on
-    it. Returns whether it applied (glibc only)."""
+    the kernel a page fault per 4 kB page zeroed again. A cold build of the corpus (``-j 2``,
+    build process and workers) took 458-498k page faults and 2.44-2.54 s of system time that
+    way; kept on the heap (blocks up to :data:`MMAP_THRESHOLD`, trimmed beyond
+    :data:`TRIM_THRESHOLD`), 263-265k and 1.91-1.96 s, with the same peak (441-444 MB); the
+    texture tasks' faults 177k -> 41k. Results do not depend on it. Returns whether it applied
+    (glibc only)."""
     if not sys.platform.startswith("linux"):
         return False
     try:
