@@ -17,7 +17,7 @@ import click
 from assetpipe.core.cli_types import FiniteFloatRange
 from assetpipe.core.errors import AssetpipeError
 
-from .results import MAX_RENDER_SIZE
+from .results import MAX_RENDER_SIZE, MIN_VALIDATE_SIZE
 
 
 def find_built_models(paths: tuple[str, ...] | list[str]) -> list[Path]:
@@ -47,7 +47,7 @@ def _list_checks(ctx: click.Context, _param: click.Parameter, value: bool) -> No
               help="Print every check: what it measures, its tolerance and why, then exit.")
 @click.option("--sources", "source_root", type=click.Path(file_okay=False),
               help="Directory holding the source models (searched recursively) for the source check.")
-@click.option("--size", default=256, show_default=True, type=click.IntRange(1, MAX_RENDER_SIZE),
+@click.option("--size", default=256, show_default=True, type=click.IntRange(MIN_VALIDATE_SIZE, MAX_RENDER_SIZE),
               help="Render size in pixels (square).")
 @click.option("--checks", default="all", show_default=True,
               help="Comma-separated checks to run (load, vulkan, bounds, silhouette, source, lods, textures, roles).")

@@ -19,6 +19,13 @@ from .camera import DEFAULT_VIEW
 
 #: the largest render target side (pixels) the offscreen renderer makes
 MAX_RENDER_SIZE = 16384
+#: the smallest side (pixels) a validation renders at. The picture checks forgive a pixel, so
+#: below some size they pass what is plainly wrong: the validate fixtures (pbr, mask, multiuv,
+#: orm) with every vertex moved 10% of the way to the box centre passed every check at 4 px
+#: and failed the source check from 8 px on (shrunk 30%: from 4 px on; 3%: at 8 and 16 px,
+#: not 12). 16 is twice the smallest size that caught the 10% shrink on each of them
+#: (tests/test_validate_mutations.py holds it at this size).
+MIN_VALIDATE_SIZE = 16
 
 DEFAULT_VIEWS: tuple[tuple[float, float, float], ...] = (DEFAULT_VIEW, (0.8, -0.3, 0.7), (0.2, -1.0, 0.3))
 
@@ -60,6 +67,13 @@ class ValidateOptions:
     role_tolerance: float = 2.0 / 255.0  # renderer/checks/roles.py says why (at its 256 px comparison level)
     timeout_s: float = 120.0
     shader_cache: str | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or not MIN_VALIDATE_SIZE <= v <= MAX_RENDER_SIZE:
+                raise ValueError(f"ValidateOptions.{name} must be an integer from {MIN_VALIDATE_SIZE} to "
+                                 f"{MAX_RENDER_SIZE} pixels (smaller pictures pass what is plainly wrong), got {v!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

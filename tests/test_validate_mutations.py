@@ -83,6 +83,22 @@ def test_mutation_is_caught(built: Path, kind: str, tmp_path: Path) -> None:
     assert ok, f"{kind} not caught by {checks} with {phrase!r}: {lines or 'passed'}"
 
 
+@pytest.mark.parametrize("model", ["pbr", "mask", "multiuv", "orm"])
+def test_the_smallest_validate_size_still_sees_a_shrunk_model(built: Path, model: str, tmp_path: Path) -> None:
+    """MIN_VALIDATE_SIZE: at it, the fixtures shrunk by a tenth fail the source check (at 4 px they
+    passed every check); unshrunk, they pass there: no false alarm from the small picture."""
+    from assetpipe.renderer.results import MIN_VALIDATE_SIZE
+
+    small = ValidateOptions(width=MIN_VALIDATE_SIZE, height=MIN_VALIDATE_SIZE)
+    mutate, checks, phrase = MUTATIONS["shrunk by a tenth"]
+    shutil.copytree(built / "out", tmp_path / "out")
+    target = tmp_path / "out" / f"{model}.json"
+    assert validate_model(target, small, isolate=False).passed
+    mutate(target)
+    ok, lines = caught(validate_model(target, small, isolate=False), checks, phrase)
+    assert ok, lines or "passed"
+
+
 def test_a_hole_a_double_sided_closed_mesh_hides_is_caught(built: Path, tmp_path: Path) -> None:
     """Through a hole in a double-sided sphere the inside shows, so every picture is covered: the
     open edges give it away."""

@@ -258,6 +258,17 @@ def bounds_too_small(m: Path) -> None:
     side_p.write_text(json.dumps(side))
 
 
+def shrunk(m: Path) -> None:
+    """Every vertex moved a tenth of the way to the centre of the positions' box: inside the
+    sidecar's bounds, every file consistent; only the pictures show it."""
+    vtx, rows, attrs = _vertices(m)
+    off = attrs["position"]["offset"]
+    pos = rows[:, off:off + 12].copy().view("<f4").reshape(-1, 3)
+    centre = (pos.max(axis=0) + pos.min(axis=0)) / 2
+    rows[:, off:off + 12] = (centre + (pos - centre) * 0.9).astype("<f4").view(np.uint8).reshape(-1, 12)
+    rows.tofile(vtx)
+
+
 def material_id_nowhere(m: Path) -> None:
     seed = _json(m)
     seed["meshes"][0]["materialId"] = "no-such-material"
@@ -292,6 +303,7 @@ MUTATIONS: dict[str, tuple[Callable[[Path], None], tuple[str, ...], str]] = {
     "LOD level with a hole": (lod_hole, ("lods",), "differ from LOD0|a hole?"),
     "bounds do not contain the vertices": (bounds_too_small, ("bounds",), "outside the sidecar bounds"),
     "material id points nowhere": (material_id_nowhere, ("load",), "materialId"),
+    "shrunk by a tenth": (shrunk, ("source",), "of the silhouette differs from the source"),
 }
 
 
