@@ -8,7 +8,7 @@ IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate 
            # 4: meta has the bounding-box centre (--recenter)
 MESH = 5  # 5: inside-out closed meshes warned about; 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
           # 4: generated tangents are MikkTSpace (pipelines/tangents.py), w in glTF's convention
-LOD = 21  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
+LOD = 22  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
         # 7: the bound's kernels compiled (numba): same formulas, float64 rounding may differ in the last digits
@@ -28,6 +28,9 @@ LOD = 21  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         # 20: meshes whose materials are equal in content (all but the name) are merged, as gltfpack does
         # 21: the height field gathers only triangles within its radius of the cell's plane (recorded bounds
         #     equal or up to 1.3% tighter); a cell with corners within rounding of each other no longer stops a chain
+        # 22: the bound settles within 2^-23 of the diagonal (was 1e-12) and the pair bound also cuts two coplanar
+        #     triangles along a wall of one (T-junctions on flat faces): levels exactly on level 0 converge (the
+        #     corpus's levels and bounds unchanged; the generated CAD boxes' bounds 2.4e-6 unconverged -> 1e-8)
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
 ENCODE = 3  # 2: stats count duplicate triangles; positionOffset; 3: a scene that skips levels keeps only the rows its kept levels use
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

@@ -23,6 +23,9 @@ import numpy as np
 from numba import njit
 
 _UP = 1.0 + 1e-12  # relative round-up of a bound assembled from rounded float64 values
+# two triangles this close to parallel (the sine of the angle between their planes) are cut
+# by a wall of one of them in the pair bound too (:func:`_pair`): T-junctions on flat faces
+COPLANAR_SIN = 1e-3
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -240,15 +243,93 @@ def _corner(a, b, c, f, j):
     return c[f, 0], c[f, 1], c[f, 2]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cut_bound(v, i, f1, f2, ox, oy, oz, mx, my, mz, a, b, c):
+    """Bound over cell i cut by the plane through o with normal m: ``d <= d_f1`` on the side
+    m points to (s >= 0), ``d <= d_f2`` on the other; inf when the plane is unusable."""
+    if not (np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz)) or (mx == 0.0 and my == 0.0 and mz == 0.0):
+        return np.inf
+    # signed side of each corner (>= 0: f1's side), as scalars: no heap array per call
+    s0 = (v[i, 0, 0] - ox) * mx + (v[i, 0, 1] - oy) * my + (v[i, 0, 2] - oz) * mz
+    s1 = (v[i, 1, 0] - ox) * mx + (v[i, 1, 1] - oy) * my + (v[i, 1, 2] - oz) * mz
+    s2 = (v[i, 2, 0] - ox) * mx + (v[i, 2, 1] - oy) * my + (v[i, 2, 2] - oz) * mz
+    best = 0.0
+    for j in range(3):
+        sj = s0 if j == 0 else (s1 if j == 1 else s2)
+        f = f1 if sj >= 0.0 else f2
+        best = max(best, _dist2(v[i, j, 0], v[i, j, 1], v[i, j, 2], a, b, c, f))
+    for j in range(3):
+        k = (j + 1) % 3
+        sj = s0 if j == 0 else (s1 if j == 1 else s2)
+        sk = s0 if k == 0 else (s1 if k == 1 else s2)
+        if (sj >= 0.0) != (sk >= 0.0):
+            den = sj - sk
+            t = sj / den if den != 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            x = v[i, j, 0] + t * (v[i, k, 0] - v[i, j, 0])
+            y = v[i, j, 1] + t * (v[i, k, 1] - v[i, j, 1])
+            z = v[i, j, 2] + t * (v[i, k, 2] - v[i, j, 2])
+            best = max(best, _dist2(x, y, z, a, b, c, f1), _dist2(x, y, z, a, b, c, f2))
+    r = np.sqrt(best)
+    if not np.isfinite(r):
+        return np.inf
+    return r * _UP
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _normal(a, b, c, f):
+    ux, uy, uz = b[f, 0] - a[f, 0], b[f, 1] - a[f, 1], b[f, 2] - a[f, 2]
+    wx, wy, wz = c[f, 0] - a[f, 0], c[f, 1] - a[f, 1], c[f, 2] - a[f, 2]
+    return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _coplanar(a, b, c, f1, f2):
+    """Whether triangles f1 and f2 lie in parallel planes to within COPLANAR_SIN (both with an
+    area)."""
+    n1x, n1y, n1z = _normal(a, b, c, f1)
+    n2x, n2y, n2z = _normal(a, b, c, f2)
+    cx = n1y * n2z - n1z * n2y
+    cy = n1z * n2x - n1x * n2z
+    cz = n1x * n2y - n1y * n2x
+    l1 = n1x * n1x + n1y * n1y + n1z * n1z
+    l2 = n2x * n2x + n2y * n2y + n2z * n2z
+    return l1 > 0.0 and l2 > 0.0 and cx * cx + cy * cy + cz * cz <= COPLANAR_SIN * COPLANAR_SIN * l1 * l2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _wall(a, b, c, f, j):
+    """The wall of triangle f's edge j (corner j to corner j + 1): a point of it and its unit
+    normal pointing into f, in f's plane; a zero normal for a degenerate triangle (the plane is
+    then refused)."""
+    e0x, e0y, e0z = _corner(a, b, c, f, j)
+    e1x, e1y, e1z = _corner(a, b, c, f, (j + 1) % 3)
+    o_x, o_y, o_z = _corner(a, b, c, f, (j + 2) % 3)
+    edx, edy, edz = _unit(e1x - e0x, e1y - e0y, e1z - e0z)
+    wx, wy, wz = o_x - e0x, o_y - e0y, o_z - e0z
+    t = wx * edx + wy * edy + wz * edz
+    wx, wy, wz = wx - t * edx, wy - t * edy, wz - t * edz
+    n = np.sqrt(wx * wx + wy * wy + wz * wz)
+    if not n > 0.0:
+        return e0x, e0y, e0z, 0.0, 0.0, 0.0
+    return e0x, e0y, e0z, wx / n, wy / n, wz / n
+
+
 @njit(cache=True, nogil=True)
-def _pair(v, i, f1, f2, a, b, c, wtri):
+def _pair(v, i, f1, f2, a, b, c, wtri, thr):
     """Bound of the distance to the target over cell i from two target triangles f1 != f2:
     the cell is cut by a plane; on f1's side ``d <= d_f1``, on the other ``d <= d_f2``, both
     convex, so each side's maximum is at its polygon's corners (the cell's corners on that
     side and the cut points on its edges). Valid for any plane. Triangles sharing an edge
     (welded vertex ids ``wtri``, so also across a seam of split vertices) are cut by the plane
     through the edge halfway between their walls; others by the mid-plane of their points
-    nearest to the cell's centroid. inf when the plane is unusable."""
+    nearest to the cell's centroid, and, where that leaves the cell above ``thr`` and the two
+    lie in one plane (:data:`COPLANAR_SIN`), by each wall of f1 (the plane through an edge,
+    square to the triangle) until one settles it: the smallest value. The walls settle a cell
+    over a T-junction, where one triangle's edge runs along a part of the other's or the two
+    meet at a vertex on a line (meshoptimizer leaves them on flat faces, with a zero-area
+    triangle between): the mid-plane of two points on that line cuts nowhere near it.
+    inf when no plane is usable."""
     # which corners of f1 does f2 have too (bit j: corner j), without a heap array per call
     mask = 0
     shared = 0
@@ -285,68 +366,48 @@ def _pair(v, i, f1, f2, a, b, c, wtri):
         wx, wy, wz = o2x - e0x, o2y - e0y, o2z - e0z
         t = wx * edx + wy * edy + wz * edz
         w2x, w2y, w2z = _unit(wx - t * edx, wy - t * edy, wz - t * edz)
-        ox, oy, oz = e0x, e0y, e0z
-        mx, my, mz = w1x - w2x, w1y - w2y, w1z - w2z
-    else:
-        cx_ = (v[i, 0, 0] + v[i, 1, 0] + v[i, 2, 0]) / 3.0
-        cy_ = (v[i, 0, 1] + v[i, 1, 1] + v[i, 2, 1]) / 3.0
-        cz_ = (v[i, 0, 2] + v[i, 1, 2] + v[i, 2, 2]) / 3.0
-        q1x, q1y, q1z = _closest_point(cx_, cy_, cz_, a, b, c, f1)
-        q2x, q2y, q2z = _closest_point(cx_, cy_, cz_, a, b, c, f2)
-        ox, oy, oz = 0.5 * (q1x + q2x), 0.5 * (q1y + q2y), 0.5 * (q1z + q2z)
-        mx, my, mz = q1x - q2x, q1y - q2y, q1z - q2z
-    if not (np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz)) or (mx == 0.0 and my == 0.0 and mz == 0.0):
-        return np.inf
-    # signed side of each corner (>= 0: f1's side), as scalars: no heap array per call
-    s0 = (v[i, 0, 0] - ox) * mx + (v[i, 0, 1] - oy) * my + (v[i, 0, 2] - oz) * mz
-    s1 = (v[i, 1, 0] - ox) * mx + (v[i, 1, 1] - oy) * my + (v[i, 1, 2] - oz) * mz
-    s2 = (v[i, 2, 0] - ox) * mx + (v[i, 2, 1] - oy) * my + (v[i, 2, 2] - oz) * mz
-    best = 0.0
-    for j in range(3):
-        sj = s0 if j == 0 else (s1 if j == 1 else s2)
-        f = f1 if sj >= 0.0 else f2
-        best = max(best, _dist2(v[i, j, 0], v[i, j, 1], v[i, j, 2], a, b, c, f))
-    for j in range(3):
-        k = (j + 1) % 3
-        sj = s0 if j == 0 else (s1 if j == 1 else s2)
-        sk = s0 if k == 0 else (s1 if k == 1 else s2)
-        if (sj >= 0.0) != (sk >= 0.0):
-            den = sj - sk
-            t = sj / den if den != 0.0 else 0.0
-            t = min(max(t, 0.0), 1.0)
-            x = v[i, j, 0] + t * (v[i, k, 0] - v[i, j, 0])
-            y = v[i, j, 1] + t * (v[i, k, 1] - v[i, j, 1])
-            z = v[i, j, 2] + t * (v[i, k, 2] - v[i, j, 2])
-            best = max(best, _dist2(x, y, z, a, b, c, f1), _dist2(x, y, z, a, b, c, f2))
-    r = np.sqrt(best)
-    if not np.isfinite(r):
-        return np.inf
-    return r * _UP
+        return _cut_bound(v, i, f1, f2, e0x, e0y, e0z, w1x - w2x, w1y - w2y, w1z - w2z, a, b, c)
+    cx_ = (v[i, 0, 0] + v[i, 1, 0] + v[i, 2, 0]) / 3.0
+    cy_ = (v[i, 0, 1] + v[i, 1, 1] + v[i, 2, 1]) / 3.0
+    cz_ = (v[i, 0, 2] + v[i, 1, 2] + v[i, 2, 2]) / 3.0
+    q1x, q1y, q1z = _closest_point(cx_, cy_, cz_, a, b, c, f1)
+    q2x, q2y, q2z = _closest_point(cx_, cy_, cz_, a, b, c, f2)
+    r = _cut_bound(v, i, f1, f2, 0.5 * (q1x + q2x), 0.5 * (q1y + q2y), 0.5 * (q1z + q2z),
+                   q1x - q2x, q1y - q2y, q1z - q2z, a, b, c)
+    if r <= thr or not _coplanar(a, b, c, f1, f2):
+        return r
+    for j in range(3):  # f1's walls (normals into f1: f1's side)
+        ox, oy, oz, mx, my, mz = _wall(a, b, c, f1, j)
+        r = min(r, _cut_bound(v, i, f1, f2, ox, oy, oz, mx, my, mz, a, b, c))
+        if r <= thr:
+            break
+    return r
 
 
 @njit(cache=True, nogil=True)
-def pair_bound(v, hint, others, a, b, c, wtri):
+def pair_bound(v, hint, others, a, b, c, wtri, thr):
     """Smallest pair bound of every cell: (K,) float64, inf where no pair applies.
 
     Args: v (K, 3, 3) cells; hint (K,) int64 the cell's best single triangle; others (K, C)
     int64 triangles to pair it with (each distinct one != hint tried once); wtri (F, 3) int64
-    the target's triangles over welded vertex ids (equal ids: same position)."""
+    the target's triangles over welded vertex ids (equal ids: same position); thr: the value
+    that settles a cell (a pair's wall cuts are tried only above it, :func:`_pair`)."""
     k = others.shape[0]
     out = np.empty(k)
     for i in range(k):
-        out[i] = _pair_cell(v, i, hint[i], others[i], a, b, c, wtri)
+        out[i] = _pair_cell(v, i, hint[i], others[i], a, b, c, wtri, thr)
     return out
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _pair_cell(v, i, h, others, a, b, c, wtri):
+def _pair_cell(v, i, h, others, a, b, c, wtri, thr):
     """:func:`pair_bound` of cell i: its best triangle ``h`` paired with each of ``others`` (C,)."""
     bv = np.inf
     for j in range(others.shape[0]):
         f = others[j]
         if f == h or _seen_before(others, j):
             continue
-        bv = min(bv, _pair(v, i, h, f, a, b, c, wtri))
+        bv = min(bv, _pair(v, i, h, f, a, b, c, wtri, thr))
     return bv
 
 
@@ -453,7 +514,7 @@ def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
         out_hint[i] = bf
         if ub[i] <= thr or not pair:
             continue
-        ub[i] = min(ub[i], _pair_cell(v, i, bf, f[i], a, b, c, wtri))
+        ub[i] = min(ub[i], _pair_cell(v, i, bf, f[i], a, b, c, wtri, thr))
     return ub, out_hint
 
 

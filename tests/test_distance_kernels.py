@@ -163,7 +163,7 @@ def test_pair_bound_holds_and_is_exact_across_a_flat_edge():
     mid = 0.5 * (a[f1] + b[f1] + c[f1]) / 3 + 0.5 * (a[f2] + b[f2] + c[f2]) / 3
     v = np.ascontiguousarray(mid[:, None] * 1.01 + rng.normal(size=(k, 3, 3)) * 0.1)
     others = np.ascontiguousarray(np.stack([f2, f1, f2], 1))  # f1 itself and repeats skipped
-    pb = pair_bound(v, f1, others, a, b, c, wtri)
+    pb = pair_bound(v, f1, others, a, b, c, wtri, np.inf)
     w = _bary()
     pts = np.einsum("sj,kjx->ksx", w, v).reshape(-1, 3)
     d1 = tri_distance(pts, np.repeat(f1, w.shape[0]), a, b, c).reshape(k, -1)
@@ -180,7 +180,7 @@ def test_pair_bound_holds_and_is_exact_across_a_flat_edge():
     cell = np.array([[[0.2, 0.2, 0], [0.9, 0.6, 0], [0.3, 0.9, 0]]])
     alone = convex_bound(cell, np.array([[0, 1]], dtype=np.int64), A, B, C)[0][0]
     assert alone > 0.1
-    assert pair_bound(cell, np.array([0]), np.array([[1]]), A, B, C, T)[0] == pytest.approx(0.0, abs=1e-12)
+    assert pair_bound(cell, np.array([0]), np.array([[1]]), A, B, C, T, np.inf)[0] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_near_bounds_equal_the_three_kernels_one_after_another():
@@ -210,7 +210,7 @@ def test_near_bounds_equal_the_three_kernels_one_after_another():
             want_h[live] = best[live]
             live &= want > thr
             if pair:
-                pb = pair_bound(v, want_h, f, a, b, c, tri)
+                pb = pair_bound(v, want_h, f, a, b, c, tri, np.inf)
                 want[live] = np.minimum(want[live], pb[live])
             np.testing.assert_array_equal(ub, want)
             np.testing.assert_array_equal(h, want_h)
