@@ -401,13 +401,32 @@ def pair_bound(v, hint, others, a, b, c, wtri, thr):
 
 @njit(cache=True, nogil=True, inline="always")
 def _pair_cell(v, i, h, others, a, b, c, wtri, thr):
-    """:func:`pair_bound` of cell i: its best triangle ``h`` paired with each of ``others`` (C,)."""
+    """:func:`pair_bound` of cell i: its best triangle ``h`` paired with each of ``others`` (C,);
+    where that leaves the cell above ``thr``, also two of ``others`` that lie in one plane
+    (:func:`_coplanar`), until a pair settles it. A cell across a vertex of a flat face lies
+    over two triangles that meet only there, and the best single triangle ``h`` may be a third
+    one touching the vertex: a zero-area cell of the box's levels (a subdivided box, 3,072
+    triangles) split around such a vertex until the work ran out."""
     bv = np.inf
-    for j in range(others.shape[0]):
+    n = others.shape[0]
+    for j in range(n):
         f = others[j]
         if f == h or _seen_before(others, j):
             continue
         bv = min(bv, _pair(v, i, h, f, a, b, c, wtri, thr))
+    if bv <= thr:
+        return bv
+    for j in range(n):
+        f = others[j]
+        if f == h or _seen_before(others, j):
+            continue
+        for k in range(j + 1, n):
+            g = others[k]
+            if g == h or g == f or _seen_before(others, k) or not _coplanar(a, b, c, f, g):
+                continue
+            bv = min(bv, _pair(v, i, f, g, a, b, c, wtri, thr))
+            if bv <= thr:
+                return bv
     return bv
 
 

@@ -54,7 +54,7 @@ from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
-from assetpipe.pipelines.patch_bound import WHY_BOUNDED, WHY_TOO_MANY, patch_bound
+from assetpipe.pipelines.patch_bound import patch_bound
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -327,10 +327,12 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
     lower = max(lower, out.lower)
     settled = 0.0
     hint = f[:, 0].copy()  # best candidate triangle so far, inherited by children
-    # whether the patch bound is worth trying on a cell: not where it failed on the cell's
-    # parent for the patch's shape (a border, fold or non-manifold edge over it, or no sheet
-    # covering it), which the children mostly inherit
-    retry = np.ones(v.shape[0], dtype=bool)
+    # (the height field is tried on every cell, also where it failed on the cell's parent: a
+    # cell whose edge reaches over a crease, a border or a fold fails, but most of its
+    # children do not. Skipping the children of failed cells left a cylinder's moved level of
+    # 256 triangles splitting its side's slivers, which all reach both rims, until the work
+    # ran out: 3.3 s and unconverged at 0.00079 of the diagonal; tried on every cell, 0.83 s
+    # and 0.00032. The corpus's 37 models took no longer: 12 bounds 0.9% tighter at most.)
     while v.shape[0]:
         thr = max(lower * (1.0 + tolerance), lower + ABS_TOLERANCE)
         # the Lipschitz bound; where it leaves the cell above thr, convexity over the
@@ -340,17 +342,16 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         f = np.ascontiguousarray(f)
         ub, hint = near_bounds(v, d, f, hint, thr, eng.a, eng.b, eng.c, target.welded_tri,
                                PAIR_FIRST)
-        settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
+        settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
         if not v.shape[0]:
             break
         # the height field of the target's patch under the cell (pipelines/patch_bound.py):
         # only triangles within thr of the cell can settle it, so the patch is gathered there
-        if PATCH_BOUND and eng.tree.nodes is not None and retry.any():
-            val, why = patch_bound(v, np.where(retry, thr, np.inf), *eng.tree.nodes, eng.a,
+        if PATCH_BOUND and eng.tree.nodes is not None:
+            val, _ = patch_bound(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a,
                                    eng.b, eng.c, target.welded_tri)
-            retry &= (why == WHY_BOUNDED) | (why == WHY_TOO_MANY)
             ub = np.minimum(ub, val)
-            settled, ub, v, d, f, hint, retry = _settle(ub, thr, settled, v, d, f, hint, retry)
+            settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
             if not v.shape[0]:
                 break
         k = v.shape[0]
@@ -369,13 +370,13 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         cand = np.ascontiguousarray(np.stack([fc, hint, f[:, 0], f[:, 1], f[:, 2]], 1))  # (K, 5)
         val, hint = convex_bound(v, cand, eng.a, eng.b, eng.c)
         ub = np.minimum(ub, val)
-        settled, ub, v, d, f, hint, fc, retry = _settle(ub, thr, settled, v, d, f, hint, fc, retry)
+        settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
         # a cell straddling the edge between two target triangles: cut it along the plane
         # between them and bound each side by its own triangle
         if v.shape[0]:
             others = np.ascontiguousarray(np.stack([fc, f[:, 0], f[:, 1], f[:, 2]], 1))
             ub = np.minimum(ub, pair_bound(v, hint, others, eng.a, eng.b, eng.c, target.welded_tri, thr))
-            settled, ub, v, d, f, hint, fc, retry = _settle(ub, thr, settled, v, d, f, hint, fc, retry)
+            settled, ub, v, d, f, hint, fc = _settle(ub, thr, settled, v, d, f, hint, fc)
         k = v.shape[0]
         if not k:
             break
@@ -415,7 +416,6 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
                             ((f[:, 0], fm[:, 0], fm[:, 2]), (fm[:, 0], f[:, 1], fm[:, 1]),
                              (fm[:, 2], fm[:, 1], f[:, 2]), (fm[:, 0], fm[:, 1], fm[:, 2]))])
         hint = np.tile(hint, 4)
-        retry = np.tile(retry, 4)
     out.upper = max(settled, out.lower)
     return out
 

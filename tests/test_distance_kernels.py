@@ -214,3 +214,23 @@ def test_near_bounds_equal_the_three_kernels_one_after_another():
                 want[live] = np.minimum(want[live], pb[live])
             np.testing.assert_array_equal(ub, want)
             np.testing.assert_array_equal(h, want_h)
+
+
+def test_a_cell_across_a_vertex_of_a_flat_fan_is_settled_by_two_of_its_triangles():
+    """A cell (nearly a segment) through the centre of a flat fan of six triangles lies over two
+    opposite ones, which meet only at the centre; the cell's best single triangle is a third.
+    Paired with that one only, the bound stays far above 0; two of the others, coplanar, settle
+    it (LOD step 22: a subdivided box's zero-area cells split until the work ran out)."""
+    ang = np.radians(np.arange(7) * 60.0)
+    ring = np.stack([np.cos(ang), np.sin(ang), np.zeros(7)], 1)
+    a = np.zeros((6, 3))
+    b, c = ring[:6].copy(), ring[1:7].copy()
+    wtri = np.stack([np.zeros(6, np.int64), np.arange(1, 7), np.r_[np.arange(2, 7), 1]], 1)
+    u = np.array([np.cos(np.radians(30.0)), np.sin(np.radians(30.0)), 0.0])
+    cell = np.array([[[0.0, 0.0, 0.0], 0.3 * u + [0, 0, 0], -0.3 * u + [1e-9, 0, 0]]])
+    thr = 1e-9
+    # over triangle 0 (0-60 degrees) and triangle 3 (180-240); the hint, 1, touches the centre only
+    with_hint = min(pair_bound(cell, np.array([1]), np.array([[f]]), a, b, c, wtri, thr)[0] for f in (0, 3))
+    assert with_hint > 0.1
+    both = pair_bound(cell, np.array([1]), np.array([[1, 0, 3]]), a, b, c, wtri, thr)[0]
+    assert both <= thr

@@ -484,3 +484,31 @@ def test_hostile_geometry_builds_chains_with_bounds(kind):
             chain = build_lod_chain(pos, tri.astype(np.uint32), uv=uv, options=LodOptions(move_vertices=move))
             assert chain.levels[0].triangles == tri.shape[0]
             assert all(lv.hausdorff >= 0 and np.isfinite(lv.hausdorff_rel) for lv in chain.levels[1:])
+
+
+def _subdivided(mesh, times: int):
+    for _ in range(times):
+        mesh = mesh.subdivide()
+    return mesh
+
+
+@pytest.mark.parametrize("name, mesh, move", [
+    # flat faces: every level lies exactly on level 0 (meshoptimizer leaves zero-area triangles
+    # and T-junctions there); before LOD step 22 one level ran out of work at 1.9e-7, 3.1 s
+    ("subdivided box", _subdivided(trimesh.creation.box((1, 2, 3)), 4), False),
+    # a cylinder's moved level: its side's slivers reach both rims; before LOD step 22 level 2
+    # ran out of work at 0.00079 of the diagonal (3.3 s); converged, 0.00032
+    ("cylinder", trimesh.creation.cylinder(0.5, 3, sections=256), True),
+    ("two boxes", _subdivided(trimesh.util.concatenate([
+        trimesh.creation.box((1, 1, 1)), trimesh.creation.box((0.5, 0.5, 2)).apply_translation((0.7, 0, 0))]), 3), False),
+])
+def test_cad_shapes_get_converged_bounds(name, mesh, move):
+    """CAD's flat faces and creases: every level's bound converges (within the tolerance of a
+    distance evaluated, not stopped by the work budget)."""
+    chain = build_lod_chain(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.uint32),
+                            normals=np.asarray(mesh.vertex_normals, np.float32),
+                            options=LodOptions(move_vertices=move))
+    assert len(chain.levels) >= 4
+    assert [lv.converged for lv in chain.levels[1:]] == [True] * (len(chain.levels) - 1), name
+    if not move:  # levels in place on flat faces: the surface is unchanged
+        assert max(lv.hausdorff_rel for lv in chain.levels[1:]) <= 2 * 2.0 ** -23
