@@ -11,7 +11,10 @@ alike; the ratio of the totals and each round's ratio are printed. gltfpack does
 processed, no measurement), which is why the goal is a ratio, not parity: <= 2x (stretch 1x).
 ``--quick``: one round. ``--also ARGS`` (repeatable): one more build of ours a round with these
 extra build options (e.g. ``--also=--no-lod-move --also=--no-lod``), each timed and compared with
-the same round's gltfpack run: where the time goes, in the same run.
+the same round's gltfpack run: where the time goes, in the same run. ``--cad``: the generated
+CAD-style models of ``benchmarks/cad_models.py`` (an assembly of 62 parts, a piping plant of 15
+bent tubes) instead of the corpus: models the corpus does not hold, few files with large
+meshes, where gltfpack's start-up per file weighs little.
 """
 
 from __future__ import annotations
@@ -81,6 +84,7 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="one round")
     ap.add_argument("--corpus", type=Path, default=CORPUS)
+    ap.add_argument("--cad", action="store_true", help="the generated CAD-style models instead of the corpus")
     ap.add_argument("--also", action="append", default=[], metavar="ARGS",
                     help="extra build options of one more variant of ours (repeatable)")
     args = ap.parse_args()
@@ -91,8 +95,13 @@ def main() -> int:
     if exe is None:
         print("gltfpack not found: nothing to compare with")
         return 1
-    files = discover_inputs([args.corpus])
     tmp = Path(tempfile.mkdtemp(prefix="coldbuild-"))
+    if args.cad:
+        from cad_models import write_cad_models
+
+        args.corpus = tmp / "cad"
+        write_cad_models(args.corpus)
+    files = discover_inputs([args.corpus])
     ours, theirs = [], []
     more: list[list[float]] = [[] for _ in variants]
     try:
