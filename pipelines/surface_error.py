@@ -348,8 +348,8 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # the height field of the target's patch under the cell (pipelines/patch_bound.py):
         # only triangles within thr of the cell can settle it, so the patch is gathered there
         if PATCH_BOUND and eng.tree.nodes is not None:
-            val, _ = patch_bound(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a,
-                                   eng.b, eng.c, target.welded_tri)
+            val, _ = patch_bound(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a, eng.b,
+                                 eng.c, target.welded_tri)
             ub = np.minimum(ub, val)
             settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
             if not v.shape[0]:
