@@ -30,7 +30,7 @@ MIN_VALIDATE_SIZE = 16
 DEFAULT_VIEWS: tuple[tuple[float, float, float], ...] = (DEFAULT_VIEW, (0.8, -0.3, 0.7), (0.2, -1.0, 0.3))
 
 
-@dataclass
+@dataclass(frozen=True)
 class ValidateOptions:
     """Options of the checks; every figure the checks compare against is here (each check's
     module says why its value is right)."""
