@@ -470,6 +470,7 @@ def build_lod_chain(
     normals: np.ndarray | None = None,
     other_attributes: Sequence[np.ndarray] = (),
     options: LodOptions = DEFAULT_LOD_OPTIONS,
+    threads: int = 1,
 ) -> LodChain:
     """Build an LOD chain with measured errors.
 
@@ -483,6 +484,8 @@ def build_lod_chain(
         the vertex buffer holds. They are not simplified against, but vertices are only
         welded (see below) when these are identical too.
       options: :class:`LodOptions`.
+      threads: the chosen levels' bounds computed on up to this many threads (the result does
+        not depend on it).
 
     Returns:
       :class:`LodChain`; ``levels[0]`` holds ``indices`` unchanged (errors 0). Every level's
@@ -588,7 +591,7 @@ def build_lod_chain(
                                       lower=[c[1] for c in chosen[1:]],
                                       engines=[est.engine_for(c[0][0]) for c in chosen[1:]],
                                       positions=[None if c[0][4] is None else est.positions(c[0][4])
-                                                 for c in chosen[1:]])
+                                                 for c in chosen[1:]], threads=threads)
         for k in range(1, len(chosen)):
             target = error_targets[k] if error_targets is not None else math.inf
             if not measured[k].hausdorff_rel <= min(budget, target if target > 0 else math.inf):

@@ -485,7 +485,11 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
         if c is not None:
             weights[c[0]] += 1
     # never more than LOD_THREADS (the cores, at most 4): -j 8 on 2 cores is 8 processes already
-    threads = min(LOD_THREADS, max(1, int(threads)) if threads is not None else LOD_THREADS, len(distinct))
+    asked = min(LOD_THREADS, max(1, int(threads)) if threads is not None else LOD_THREADS)
+    threads = min(asked, len(distinct))
+    # threads the distinct meshes leave idle measure a chain's levels at once (a model of one
+    # big mesh, a scan, used one core of -j 2 for all of its bounds)
+    level_threads = max(1, asked // max(1, len(distinct)))
     shares = None
     if options.balance_meshes and options.error_targets() is None and len(distinct) > 1:
         shares = balanced_ratios([merged[i][2:6] + (merged[i][6],) for i in distinct],
@@ -496,7 +500,7 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
         _, _, pos, idx, uv, normals, others, _, _ = merged[i]
         opts = options if shares is None else dataclasses.replace(options, ratios=shares[i])
         return build_lod_chain(pos, idx, uv=uv, normals=normals, other_attributes=others,
-                               options=opts).levels
+                               options=opts, threads=level_threads).levels
 
     # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
     # kernels release the GIL); each chain is a pure function of its mesh, so the result does

@@ -45,6 +45,7 @@ meshes are 0 apart. Degenerate triangles are fine (they count as segments or poi
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -545,16 +546,17 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
 def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
              work_per_triangle: float | None = None,
              lower: Sequence[float | None] | None = None,
-             engines: Sequence[_Engine | None] | None = None) -> list[SurfaceError]:
+             engines: Sequence[_Engine | None] | None = None, threads: int = 1) -> list[SurfaceError]:
+    """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices). ``threads``: the
+    meshes measured at once, at most (each is independent of the others: the same results)."""
     if work_per_triangle is None:
         work_per_triangle = DEFAULT_WORK_PER_TRIANGLE
-    """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices)."""
-    results: list[SurfaceError] = []
     ref_empty = ref.indices.shape[0] == 0
-    for i, (local, tri, shared) in enumerate(meshes):
+
+    def one(i: int) -> SurfaceError:
+        local, tri, shared = meshes[i]
         if tri.shape[0] == 0 or ref_empty:
-            results.append(ZERO_ERROR if (tri.shape[0] == 0 and ref_empty) else _INF_ERROR)
-            continue
+            return ZERO_ERROR if (tri.shape[0] == 0 and ref_empty) else _INF_ERROR
         if not shared:
             _check_finite(local, tri, "measured mesh")
         # a level over the reference's own vertices shares its welding (np.unique of the rows:
@@ -577,10 +579,16 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
         h = max(fwd.upper, bwd.upper)
         lo = max(fwd.lower, bwd.lower, known)
         r = math.sqrt(0.5 * (f_ms + b_ms))
-        results.append(SurfaceError(
-            h * ref.scale, r * ref.scale, h, r, fwd.upper, bwd.upper, lo * ref.scale, lo,
-            fwd.converged and bwd.converged))
-    return results
+        return SurfaceError(h * ref.scale, r * ref.scale, h, r, fwd.upper, bwd.upper, lo * ref.scale, lo,
+                            fwd.converged and bwd.converged)
+
+    if threads > 1 and len(meshes) > 1 and not ref_empty:
+        # what the meshes share is made before the threads start (built once, then only read;
+        # the compiled kernels and the BVH queries release the GIL)
+        ref.side.engine, ref.side.weld, ref.side.welded_tri  # noqa: B018
+        with ThreadPoolExecutor(max_workers=min(threads, len(meshes))) as pool:
+            return list(pool.map(one, range(len(meshes))))
+    return [one(i) for i in range(len(meshes))]
 
 
 def measure_against(
@@ -605,7 +613,8 @@ def measure_against(
 def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
                    lower: Sequence[float | None] | None = None,
                    engines: Sequence[_Engine | None] | None = None,
-                   positions: Sequence[np.ndarray | None] | None = None) -> list[SurfaceError]:
+                   positions: Sequence[np.ndarray | None] | None = None,
+                   threads: int = 1) -> list[SurfaceError]:
     """Measure index buffers over the reference's *own* vertex array (LOD levels).
 
     Args: ref from :func:`prepare_reference`; levels: (K, 3) int arrays indexing the
@@ -616,14 +625,15 @@ def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
     already built over that level's positions and triangles (``_Engine``), reused.
     ``positions``: per level, None (the reference's positions) or its own (N, 3) float64
     positions in the reference's local frame (a level whose vertices moved): it is then
-    measured as a separate mesh, nothing assumed shared.
+    measured as a separate mesh, nothing assumed shared. ``threads``: levels measured at once,
+    at most (the results do not depend on it).
     """
     prepared = []
     for i, l in enumerate(levels):
         own = positions[i] if positions is not None else None
         tri = np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64)
         prepared.append((ref.positions, tri, True) if own is None else (own, tri, False))
-    return _measure(ref, prepared, lower=lower, engines=engines)
+    return _measure(ref, prepared, lower=lower, engines=engines, threads=threads)
 
 
 def measure_error(

@@ -555,3 +555,28 @@ def test_affine_copies_map_moved_vertices():
         pa = a.vertices[la.indices.reshape(-1), :3].astype(np.float64)
         pb = b.vertices[lb.indices.reshape(-1), :3].astype(np.float64)
         assert np.allclose(pa @ lin.T + [5, -2, 1], pb, atol=1e-5 * 3 * 2)
+
+
+def test_a_single_mesh_measures_its_levels_on_the_idle_threads(monkeypatch):
+    """One distinct mesh leaves the other threads idle: its levels' bounds are computed on them,
+    with the same result bit for bit (each level's bound is independent of the others)."""
+    import assetpipe.pipelines.lod_model as lod_model
+    import assetpipe.pipelines.surface_error as surface_error
+
+    monkeypatch.setattr(lod_model, "LOD_THREADS", 4)
+    parts = [_part(*_bumpy_sphere(3, seed=1), key=1)]
+    seen = []
+    real = surface_error._measure
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("threads", 1))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(surface_error, "_measure", spy)
+    one = build_model_lods(parts, FAST, threads=1)
+    two = build_model_lods(parts, FAST, threads=2)
+    assert seen == [1, 2]
+    assert len(one[0].levels) > 2
+    assert [lv.indices.tobytes() for lv in one[0].levels] == [lv.indices.tobytes() for lv in two[0].levels]
+    assert [(lv.hausdorff, lv.hausdorff_lower_rel, lv.rms, lv.converged) for lv in one[0].levels] == \
+        [(lv.hausdorff, lv.hausdorff_lower_rel, lv.rms, lv.converged) for lv in two[0].levels]
