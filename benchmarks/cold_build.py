@@ -97,7 +97,8 @@ def main() -> int:
         return 1
     tmp = Path(tempfile.mkdtemp(prefix="coldbuild-"))
     if args.cad:
-        from cad_models import write_cad_models
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from cad_models import write_cad_models  # noqa: PLC0415 - beside this file
 
         args.corpus = tmp / "cad"
         write_cad_models(args.corpus)

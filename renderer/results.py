@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from assetpipe.core.json_shape import is_int
+
 from .camera import DEFAULT_VIEW
 
 #: the largest render target side (pixels) the offscreen renderer makes
@@ -71,7 +73,7 @@ class ValidateOptions:
     def __post_init__(self) -> None:
         for name in ("width", "height"):
             v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or not MIN_VALIDATE_SIZE <= v <= MAX_RENDER_SIZE:
+            if not is_int(v) or not MIN_VALIDATE_SIZE <= v <= MAX_RENDER_SIZE:
                 raise ValueError(f"ValidateOptions.{name} must be an integer from {MIN_VALIDATE_SIZE} to "
                                  f"{MAX_RENDER_SIZE} pixels (smaller pictures pass what is plainly wrong), got {v!r}")
 

@@ -85,13 +85,13 @@ class S3Server:
                 os.environ[k] = v
 
 
-def make_cluster():
-    """A real Dask cluster: 2 worker processes of 1 thread each, on 127.0.0.1. The scheduler's
+def make_cluster(workers: int = 2):
+    """A real Dask cluster: ``workers`` worker processes of 1 thread each, on 127.0.0.1. The scheduler's
     HTTP server (which ``dashboard_address=None`` does not turn off: it then takes 8787) listens
     on a free port, so that two clusters, or another program on 8787, do not collide."""
     from distributed import LocalCluster
 
-    return LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                         dashboard_address="127.0.0.1:0")
 
 

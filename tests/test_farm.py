@@ -219,12 +219,11 @@ def mixed_cluster():
     import subprocess
     import sys
 
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV
 
-    c = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                     dashboard_address="127.0.0.1:0")  # a free port (farm_fixtures.make_cluster)
+    c = make_cluster(workers=1)
     dask = Path(sys.executable).with_name("dask")
     proc = subprocess.Popen([str(dask), "worker", c.scheduler_address, "--nthreads", "1", "--host", "127.0.0.1",
                              "--no-dashboard", "--name", "portable-only"],
