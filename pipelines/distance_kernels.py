@@ -305,14 +305,18 @@ def _wall(a, b, c, f, j):
     e0x, e0y, e0z = _corner(a, b, c, f, j)
     e1x, e1y, e1z = _corner(a, b, c, f, (j + 1) % 3)
     o_x, o_y, o_z = _corner(a, b, c, f, (j + 2) % 3)
+    mx, my, mz = _into(e0x, e0y, e0z, e1x, e1y, e1z, o_x, o_y, o_z)
+    return e0x, e0y, e0z, mx, my, mz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _into(e0x, e0y, e0z, e1x, e1y, e1z, ox, oy, oz):
+    """The unit normal of the line through e0 and e1 towards o, in the plane of the three (the
+    zero vector when o is on the line)."""
     edx, edy, edz = _unit(e1x - e0x, e1y - e0y, e1z - e0z)
-    wx, wy, wz = o_x - e0x, o_y - e0y, o_z - e0z
+    wx, wy, wz = ox - e0x, oy - e0y, oz - e0z
     t = wx * edx + wy * edy + wz * edz
-    wx, wy, wz = wx - t * edx, wy - t * edy, wz - t * edz
-    n = np.sqrt(wx * wx + wy * wy + wz * wz)
-    if not n > 0.0:
-        return e0x, e0y, e0z, 0.0, 0.0, 0.0
-    return e0x, e0y, e0z, wx / n, wy / n, wz / n
+    return _unit(wx - t * edx, wy - t * edy, wz - t * edz)
 
 
 @njit(cache=True, nogil=True)
@@ -358,14 +362,9 @@ def _pair(v, i, f1, f2, a, b, c, wtri, thr):
         e1x, e1y, e1z = _corner(a, b, c, f1, e1)
         o1x, o1y, o1z = _corner(a, b, c, f1, o1)
         o2x, o2y, o2z = _corner(a, b, c, f2, o2)
-        edx, edy, edz = _unit(e1x - e0x, e1y - e0y, e1z - e0z)
         # unit in-plane normals of the edge, pointing into each triangle
-        wx, wy, wz = o1x - e0x, o1y - e0y, o1z - e0z
-        t = wx * edx + wy * edy + wz * edz
-        w1x, w1y, w1z = _unit(wx - t * edx, wy - t * edy, wz - t * edz)
-        wx, wy, wz = o2x - e0x, o2y - e0y, o2z - e0z
-        t = wx * edx + wy * edy + wz * edz
-        w2x, w2y, w2z = _unit(wx - t * edx, wy - t * edy, wz - t * edz)
+        w1x, w1y, w1z = _into(e0x, e0y, e0z, e1x, e1y, e1z, o1x, o1y, o1z)
+        w2x, w2y, w2z = _into(e0x, e0y, e0z, e1x, e1y, e1z, o2x, o2y, o2z)
         return _cut_bound(v, i, f1, f2, e0x, e0y, e0z, w1x - w2x, w1y - w2y, w1z - w2z, a, b, c)
     cx_ = (v[i, 0, 0] + v[i, 1, 0] + v[i, 2, 0]) / 3.0
     cy_ = (v[i, 0, 1] + v[i, 1, 1] + v[i, 2, 1]) / 3.0
