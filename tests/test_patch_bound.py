@@ -159,3 +159,43 @@ def test_random_noisy_surfaces_never_below_dense_samples():
         val, why = _bound(pos, tri, cells, 0.1)
         for i in np.flatnonzero(why == WHY_BOUNDED):
             assert val[i] >= _dense_max(cells[i], pos, tri, rng, 1500), (trial, i)
+
+
+def test_side_value_shortcuts_agree_with_the_full_tests():
+    """What patch_bound decides from T's side values alone (corners of F in 2D, T's edges CCW)
+    is what the full tests say: all of F outside one edge (by the margin): separated; one
+    corner inside all three by more than the margin: not separated; every corner inside: the
+    clipped polygon is F itself, bit for bit. Random triangles around T, some near its edges
+    and corners, at two margins."""
+    from assetpipe.pipelines.patch_bound import _clip, _separated
+
+    rng = np.random.default_rng(7)
+    tx, ty = np.array([0.0, 1.0, 0.3]), np.array([0.0, 0.0, 0.8])
+    counts = {"out": 0, "in": 0, "all in": 0}
+    for margin in (1e-12, 1e-3):
+        for _ in range(20000):
+            if rng.random() < 0.25:  # corners inside T (barycentric), some on its edges
+                w = rng.dirichlet([1.0, 1.0, 1.0], 3) * (rng.random((3, 1)) < 0.8)
+                w[:, 0] = 1.0 - w[:, 1:].sum(1)
+                fx, fy = w @ tx, w @ ty
+            else:
+                fx = rng.choice([0.0, 1.0, 0.3], 3) + rng.normal(0.0, rng.choice([1e-12, 1e-3, 0.3]), 3)
+                fy = rng.choice([0.0, 0.0, 0.8], 3) + rng.normal(0.0, rng.choice([1e-12, 1e-3, 0.3]), 3)
+            if (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fy[1] - fy[0]) * (fx[2] - fx[0]) < 0:
+                fx, fy = fx[::-1].copy(), fy[::-1].copy()
+            ex, ey = np.roll(tx, -1) - tx, np.roll(ty, -1) - ty
+            lim = margin * np.hypot(ex, ey)
+            val = ex[:, None] * (fy[None] - ty[:, None]) - ey[:, None] * (fx[None] - tx[:, None])  # (edge, corner)
+            sep = _separated(fx, fy, 3, tx, ty, -margin)
+            if (val <= lim[:, None]).all(axis=1).any():
+                counts["out"] += 1
+                assert sep
+            if (val > lim[:, None]).all(axis=0).any():
+                counts["in"] += 1
+                assert not sep
+            if (val >= 0).all():
+                counts["all in"] += 1
+                ox, oy, bx, by = (np.empty(12) for _ in range(4))
+                assert _clip(fx, fy, tx, ty, ox, oy, bx, by) == 3
+                assert (ox[:3] == fx).all() and (oy[:3] == fy).all()
+    assert min(counts.values()) > 500, counts  # each case was met
