@@ -200,17 +200,17 @@ def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_resu
     graph = Graph(store, stat, todo[0].options, explain_prev, jobs=jobs, executor=executor)
     assets = [AssetState(source=s.source, id=s.id, options=s.options, plan=s.plan, extra_sources=s.extra_sources,
                          key=s.key) for s in todo]
-    try:
-        graph.build(assets)
-    except AssetpipeError:  # the cache is unusable, ...: the whole build stops with its one line
-        raise
-    except Exception as exc:  # a bug of ours between steps: every unfinished asset fails, the report is written
-        for a in assets:
-            if not a.failed and a.records.get("encode") is None:
-                a.error = f"{a.source}: internal error in the build graph ({type(exc).__name__}: {exc}); please report it"
-                a.internal = _format_exc()
+    spec_of = {id(a): spec for spec, a in zip(todo, assets)}
+    finished: set[int] = set()
     explain_steps = dict(explain_prev)
-    for spec, a in zip(todo, assets):
+
+    def finish(a: AssetState) -> None:
+        """Write a finished asset's outputs and its result (once): called by the graph as soon as
+        the asset is done, while the others are still building, and here for the rest."""
+        if id(a) in finished:
+            return
+        finished.add(id(a))
+        spec = spec_of[id(a)]
         key = spec.key
         r = AssetResult(source=str(a.source), id=a.id, status="failed", seconds=a.seconds)
         r.steps = [{"step": run.step, "ran": run.ran, **({"reason": run.reason} if run.ran else {})}
@@ -252,6 +252,18 @@ def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_resu
         by_key[key] = r
         if on_result:
             on_result(r, len(by_key), total)
+
+    try:
+        graph.build(assets, on_done=finish)
+    except AssetpipeError:  # the cache is unusable, ...: the whole build stops with its one line
+        raise
+    except Exception as exc:  # a bug of ours between steps: every unfinished asset fails, the report is written
+        for a in assets:
+            if id(a) not in finished and not a.failed and a.records.get("encode") is None:
+                a.error = f"{a.source}: internal error in the build graph ({type(exc).__name__}: {exc}); please report it"
+                a.internal = _format_exc()
+    for a in assets:  # those failed before the last steps (and any the graph did not finish)
+        finish(a)
     return explain_steps
 
 

@@ -16,11 +16,14 @@ files with their digests and is valid only while they all still match (as ccache
 Images are not import dependencies: a texture edit reruns only the texture steps that read
 that image and the encode steps of the models that use them.
 
-Steps run in phases (import; mesh; lod + textures; encode), each phase's missing steps in
-parallel on a process pool when ``jobs > 1``. Results do not depend on ``jobs``. When an import
-ran, the build process loads the LOD kernels on a thread during the mesh phase and forks new
-workers for the later phases: they inherit the kernels instead of each loading them (numba's
-set-up, about 0.75 s a process; :meth:`Executor.warm`).
+Steps run in phases (import; mesh; lod + textures + encode), each phase's missing steps in
+parallel on a process pool when ``jobs > 1``. In the last phase a model's encode step starts as
+soon as its own chain and textures are in, and the build writes that model's outputs while the
+workers go on with the other models (:meth:`Graph._finish_streamed`; an executor of whole phases,
+the farm's, runs lod + textures, then encode). Results do not depend on ``jobs`` or on the order
+steps finish in. When an import ran, the build process loads the LOD kernels on a thread during
+the mesh phase and forks new workers for the later phases: they inherit the kernels instead of
+each loading them (numba's set-up, about 0.75 s a process; :meth:`Executor.warm`).
 """
 
 from __future__ import annotations
@@ -166,6 +169,32 @@ class Executor:
                 self._restart()
         return out
 
+    def submit(self, call: tuple):
+        """Start one task call; a future of its ``(status, value, seconds)`` (see :meth:`outcome`).
+        Inline (``jobs == 1``) it runs here, now."""
+        from concurrent.futures import Future
+
+        if self.pool is None:
+            f = Future()
+            f.set_result(steps.call_task(*call))
+            return f
+        f = self.pool.submit(steps.call_task, *call)
+        f.assetpipe_pool = self.pool
+        return f
+
+    def outcome(self, future) -> tuple[str, object, float]:
+        """A finished future's ``(status, value, seconds)``: a worker that died (killed, or a
+        native library's fault) fails the tasks it took down, and the pool is started again
+        (once per broken pool)."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return future.result()
+        except BrokenProcessPool:
+            if getattr(future, "assetpipe_pool", None) is self.pool:
+                self._restart()
+            return ("internal", "a build worker process crashed (killed or a native library fault)", 0.0)
+
     def _new_pool(self):
         """A process pool whose workers die with this process (assetpipe/worker_life.py)."""
         from concurrent.futures import ProcessPoolExecutor
@@ -193,6 +222,27 @@ class Executor:
 LOD_SECONDS_PER_TRIANGLE = 4e-5
 TEXTURE_SECONDS_PER_BYTE = 2e-6
 EMBEDDED_IMAGE_BYTES = 250_000  # an embedded image's size is not looked up: a typical one
+
+
+@dataclass
+class _Phase:
+    """The keys of one phase (:meth:`Graph._lookup`): the records found or made (None: the step
+    failed), the calls to run and their hand-out order, each key's owners (asset, step label, key
+    inputs) and each asset's keys in the order of its jobs, and the outcome of each key run."""
+
+    with_record: object = None
+    results: dict = field(default_factory=dict)    # key -> record | None
+    to_run: dict = field(default_factory=dict)     # key -> task call
+    order: list = field(default_factory=list)      # keys to run, largest estimated cost first
+    rank: dict = field(default_factory=dict)       # key -> its place in ``order``
+    owners: dict = field(default_factory=dict)     # key -> [(asset, label, key inputs)]
+    first: dict = field(default_factory=dict)      # key -> its place among the phase's keys
+    keys_of: dict = field(default_factory=dict)    # id(asset) -> (asset, {key: None} in job order)
+    outcome: dict = field(default_factory=dict)    # key -> (status, value, seconds) of a run key
+
+    @property
+    def assets(self) -> list[AssetState]:
+        return [a for a, _ in self.keys_of.values()]
 
 
 class Graph:
@@ -246,9 +296,16 @@ class Graph:
         ``costs`` (one per job): an estimate of each task's work; the tasks to run are handed to
         the executor largest first, so that a long task does not start last and hold up the
         phase on one worker (results and records do not depend on the order)."""
-        results: dict[str, dict | None] = {}
-        to_run: dict[str, tuple] = {}
-        owners: dict[str, list[tuple[AssetState, str, dict]]] = {}
+        ph = self._lookup(jobs, accept, with_record, costs)
+        for key, out in zip(ph.order, self.executor.map([ph.to_run[k] for k in ph.order])):
+            self._store_result(ph, key, *out)
+        for a in ph.assets:
+            self._settle(ph, a)
+        return ph.results
+
+    def _lookup(self, jobs, accept=None, with_record=None, costs=None) -> _Phase:
+        """A phase's keys looked up in the store (see :meth:`_run_phase`)."""
+        ph = _Phase(with_record=with_record)
         if hasattr(self.store, "prefetch"):  # a remote cache tier: fetch the phase's hits in one batch
             self.store.prefetch([digest_json(kin) for _, _, kin, _ in jobs])
         cost_of: dict[str, float] = {}
@@ -257,62 +314,88 @@ class Graph:
             if costs is not None:
                 cost_of[key] = max(cost_of.get(key, 0.0), costs[j])
             for a in assets:
-                owners.setdefault(key, []).append((a, label, kin))
-            if key in results or key in to_run:
+                if key not in ph.owners:
+                    ph.owners[key] = []
+                    ph.first[key] = len(ph.first)
+                ph.owners[key].append((a, label, kin))
+                ph.keys_of.setdefault(id(a), (a, {}))[1].setdefault(key, None)
+            if key in ph.results or key in ph.to_run:
                 continue
             rec = self.store.get_record(key)
             if rec is not None and (accept is None or accept(call, rec)):
-                results[key] = rec
+                ph.results[key] = rec
                 self.store.hits += 1
             else:  # absent, or stale: run it and overwrite the record
-                to_run[key] = call
+                ph.to_run[key] = call
                 self.store.misses += 1
-        keys = list(to_run)
+        ph.order = list(ph.to_run)
         if costs is not None:
-            keys.sort(key=lambda k: -cost_of.get(k, 0.0))  # stable: ties keep the asset order
-        for key, (status, value, secs) in zip(keys, self.executor.map([to_run[k] for k in keys])):
-            for a, _, _ in owners[key]:
+            ph.order.sort(key=lambda k: -cost_of.get(k, 0.0))  # stable: ties keep the asset order
+        ph.rank = {k: i for i, k in enumerate(ph.order)}
+        return ph
+
+    def _store_result(self, ph: _Phase, key: str, status: str, value, secs: float) -> None:
+        """One run key's outcome: its record stored (or None: failed), kept for :meth:`_settle`."""
+        if status == "ok":
+            try:  # a fresh record reads back exactly as a cached one (sorted keys): same outputs
+                value = json.loads(canonical_json(value))
+            except ValueError:  # NaN or infinity (a value in the file overflows): that asset fails
+                status, value = "nonfinite", "a number that is not finite (NaN or infinity) reached its result"
+        if status == "ok":
+            self.store.put_record(key, value)
+            ph.results[key] = value
+        else:
+            ph.results[key] = None
+        ph.outcome[key] = (status, value, secs)
+
+    def _settle(self, ph: _Phase, a: AssetState) -> None:
+        """Asset ``a``'s part of a phase, once each of its keys has a result: its times, its
+        failures (in the order the keys were handed out) and its step runs and records (in the
+        order of its jobs). The same for ``a`` whatever order the keys finished in, or whether
+        the other assets of the phase are done."""
+        mine = ph.keys_of.get(id(a), (a, {}))[1]
+        for key in sorted((k for k in mine if k in ph.outcome), key=ph.rank.__getitem__):
+            status, value, secs = ph.outcome[key]
+            for o, label, _ in ph.owners[key]:
+                if o is not a:
+                    continue
                 a.seconds += secs
-            if status == "ok":
-                try:  # a fresh record reads back exactly as a cached one (sorted keys): same outputs
-                    value = json.loads(canonical_json(value))
-                except ValueError:  # NaN or infinity (a value in the file overflows): that asset fails
-                    status, value = "nonfinite", "a number that is not finite (NaN or infinity) reached its result"
-            if status == "ok":
-                self.store.put_record(key, value)
-                results[key] = value
-            else:
-                results[key] = None
-                for a, label, _ in owners[key]:
-                    if status == "memory":
-                        value = f"out of memory in step {label}"
-                    if label.startswith("texture"):
-                        a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
-                        if status == "internal":
-                            a.warnings.append(str(value))
-                    elif status == "memory":
-                        a.error = f"{a.source}: {value}"
-                    elif status == "nonfinite":
-                        a.error = f"{a.source}: step {label}: {value}"
-                    elif status == "asset":
-                        a.error = str(value)
-                    else:
-                        a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
-                        a.internal = str(value)
-        for key, owner_list in owners.items():
-            rec = results.get(key)
-            for a, label, kin in owner_list:
-                if with_record is not None and rec is not None:
-                    kin = with_record(kin, rec)
+                if status == "ok":
+                    continue
+                if status == "memory":
+                    value = f"out of memory in step {label}"
+                if label.startswith("texture"):
+                    a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
+                    if status == "internal":
+                        a.warnings.append(str(value))
+                elif status == "memory":
+                    a.error = f"{a.source}: {value}"
+                elif status == "nonfinite":
+                    a.error = f"{a.source}: step {label}: {value}"
+                elif status == "asset":
+                    a.error = str(value)
+                else:
+                    a.error = f"{a.source}: internal error in step {label} ({str(value).splitlines()[0]}); please report it"
+                    a.internal = str(value)
+        for key in sorted(mine, key=ph.first.__getitem__):  # the phase's order of first use
+            rec = ph.results.get(key)
+            for o, label, kin in ph.owners[key]:
+                if o is not a:
+                    continue
+                if ph.with_record is not None and rec is not None:
+                    kin = ph.with_record(kin, rec)
                 a.key_inputs[label] = kin
-                ran = key in to_run
+                ran = key in ph.to_run
                 prev = self.previous.get(a.key, {}).get(label)
                 a.runs.append(StepRun(label, ran, explain(prev, kin) if ran else None))
                 a.records[label] = rec
-        return results
 
     # -- the phases ---------------------------------------------------------------------
-    def build(self, assets: list[AssetState]) -> None:
+    def build(self, assets: list[AssetState], on_done=None) -> None:
+        """Run the steps of ``assets``. ``on_done(asset)``: called once per asset as soon as it is
+        finished (encoded, or failed at a step), while the others go on; assets failed before
+        the LOD phase are left to the caller."""
+        on_done = on_done or (lambda a: None)
         try:
             self._import(assets)
             live = [a for a in assets if not a.failed]
@@ -328,9 +411,17 @@ class Graph:
                 fresh()
             # textures need only the import: they run beside the LOD chains, which are most of a
             # cold build's work, so the longest chain starts first instead of after every texture
-            self._lod_and_textures(live)
-            live = [a for a in live if not a.failed]
-            self._encode(live)
+            if hasattr(self.executor, "submit"):
+                self._finish_streamed(live, on_done)
+            else:  # an executor of whole phases (the farm's)
+                self._lod_and_textures(live)
+                for a in live:
+                    if a.failed:
+                        on_done(a)
+                live = [a for a in live if not a.failed]
+                self._encode(live)
+                for a in live:
+                    on_done(a)
         finally:
             self.executor.close()
 
@@ -601,28 +692,103 @@ class Graph:
                         "textures": {}})
         return out, files
 
+    def _encode_job(self, a: AssetState) -> tuple:
+        lod_blob = a.records["lod"]["blobs"]["lod"]
+        materials, tex_files = self._materials(a)
+        a.outputs.update(tex_files)
+        sources = self._sources(a)
+        warnings = list(dict.fromkeys(list(a.records["import"]["meta"]["warnings"]) + a.warnings))
+        keep = self._kept_levels(a)
+        layout = self._layout(a)
+        tin = {"lod": lod_blob, "materials": digest_json(materials), "sources": digest_json(sources),
+               "warnings": digest_json(warnings)}
+        offset = a.records["import"]["meta"]["center"] if self._mesh_opts(a).get("recenter") else None
+        kin = self._key_inputs("encode", tin, {"id": a.id, "layout": layout, "keep": keep, "offset": offset})
+        return ([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, layout,
+                                     materials, sources, warnings, keep, offset))
+
+    @staticmethod
+    def _after_encode(a: AssetState) -> None:
+        rec = a.records.get("encode")
+        if rec is not None:
+            a.outputs.update(rec["blobs"])
+            a.warnings = list(rec["meta"]["warnings"])
+
     def _encode(self, assets: list[AssetState]) -> None:
-        jobs = []
+        self._run_phase([self._encode_job(a) for a in assets])
         for a in assets:
-            lod_blob = a.records["lod"]["blobs"]["lod"]
-            materials, tex_files = self._materials(a)
-            a.outputs.update(tex_files)
-            sources = self._sources(a)
-            warnings = list(dict.fromkeys(list(a.records["import"]["meta"]["warnings"]) + a.warnings))
-            keep = self._kept_levels(a)
-            layout = self._layout(a)
-            tin = {"lod": lod_blob, "materials": digest_json(materials), "sources": digest_json(sources),
-                   "warnings": digest_json(warnings)}
-            offset = a.records["import"]["meta"]["center"] if self._mesh_opts(a).get("recenter") else None
-            kin = self._key_inputs("encode", tin, {"id": a.id, "layout": layout, "keep": keep, "offset": offset})
-            jobs.append(([a], "encode", kin, (steps.task_encode, str(self.store.root), a.id, lod_blob, layout,
-                                              materials, sources, warnings, keep, offset)))
-        self._run_phase(jobs)
+            self._after_encode(a)
+
+    def _finish_streamed(self, assets: list[AssetState], on_done) -> None:
+        """The LOD chains and textures, then each model's encode step as soon as its own chain
+        and textures are in (not after every model's), and ``on_done`` for it as soon as it is
+        encoded: the build process writes a model's outputs while the workers go on with the
+        others' chains, instead of every model's encode and outputs waiting for the last chain.
+
+        At most ``jobs + 1`` tasks are handed to the pool at a time (one queued, so no worker
+        waits): ready encode steps first, then what a model with a finished step still waits
+        for (its textures, once its chain is in), then the rest largest estimated cost first. Each model's records, warnings and outputs are the same
+        as with one phase after the other (:meth:`_settle`)."""
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        lod_jobs, lod_costs = self._lod_jobs(assets)
+        tex_jobs, tex_costs = self._texture_jobs(assets)
+        ph = self._lookup(lod_jobs + tex_jobs, costs=lod_costs + tex_costs)
+        waiting = {id(a): sum(k in ph.to_run for k in ph.keys_of.get(id(a), (a, {}))[1]) for a in assets}
+        users: dict[str, list[AssetState]] = {}
+        for k in ph.to_run:
+            for a in {id(o): o for o, _, _ in ph.owners[k]}.values():
+                users.setdefault(k, []).append(a)
+        queue = list(reversed(ph.order))   # popped from the end: largest first
+        encodes: list[tuple[AssetState, _Phase]] = []  # ready encode steps, in the order they got ready
+        running: dict = {}  # future -> (phase, key, asset or None)
+        limit = getattr(self.executor, "jobs", 1) + 1
+
+        def ready(a: AssetState) -> None:
+            """a's chain and textures are in: settle them, then its encode step (or done)."""
+            self._settle(ph, a)
+            self._after_textures([a])
+            if a.failed:
+                on_done(a)
+                return
+            eph = self._lookup([self._encode_job(a)])
+            if not eph.order:  # cached
+                self._settle(eph, a)
+                self._after_encode(a)
+                on_done(a)
+            else:
+                encodes.append((a, eph))
+
         for a in assets:
-            rec = a.records.get("encode")
-            if rec is not None:
-                a.outputs.update(rec["blobs"])
-                a.warnings = list(rec["meta"]["warnings"])
+            if waiting[id(a)] == 0:
+                ready(a)
+        while queue or encodes or running:
+            while len(running) < limit and (encodes or queue):
+                if encodes:
+                    a, eph = encodes.pop(0)
+                    key = eph.order[0]
+                    running[self.executor.submit(eph.to_run[key])] = (eph, key, a)
+                else:
+                    key = queue.pop()
+                    running[self.executor.submit(ph.to_run[key])] = (ph, key, None)
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for f in sorted(done, key=lambda f: running[f][1]):  # a fixed order among those done at once
+                p, key, a = running.pop(f)
+                self._store_result(p, key, *self.executor.outcome(f))
+                if a is not None:  # an encode step
+                    self._settle(p, a)
+                    self._after_encode(a)
+                    on_done(a)
+                    continue
+                for u in users.get(key, ()):
+                    waiting[id(u)] -= 1
+                    if waiting[id(u)] == 0:
+                        ready(u)
+                    else:  # what u still waits for (its textures, mostly) goes next
+                        mine = ph.keys_of[id(u)][1]
+                        later = [k for k in queue if k in mine]
+                        if later:
+                            queue = [k for k in queue if k not in mine] + later
 
     def _sources(self, a: AssetState) -> list[dict]:
         base = a.source.parent.resolve()

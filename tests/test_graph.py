@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from assetpipe import graph, steps
 from assetpipe.cache.serialize import unpack
 from assetpipe.cache.store import Store
@@ -20,6 +22,10 @@ class _Recording(graph.Executor):
     def map(self, calls):
         type(self).calls.extend(calls)
         return super().map(calls)
+
+    def submit(self, call):
+        type(self).calls.append(call)
+        return super().submit(call)
 
 
 def test_lod_tasks_start_largest_first_and_outputs_do_not_depend_on_it(tmp_path, monkeypatch):
@@ -90,3 +96,61 @@ def test_workers_forked_after_warming_inherit_the_lod_kernels(tmp_path):
     inline.warm()
     inline.fresh_pool()
     assert inline.pool is None and inline._warming is None
+
+
+class _Phased(_Recording):
+    """The real executor without ``submit``: the graph then runs lod + textures, then encode,
+    as it does with an executor of whole phases (the farm's)."""
+
+    @property
+    def submit(self):
+        raise AttributeError("submit")
+
+
+def _textured_models(src: Path) -> None:
+    """Three spheres of different sizes; two share one texture, one has its own."""
+    from PIL import Image
+
+    src.mkdir()
+    rng = np.random.default_rng(3)
+    for name in ("shared.png", "own.png"):
+        Image.fromarray(rng.integers(0, 255, (32, 32, 3), dtype=np.uint8)).save(src / name)
+    for name, (lon, lat), image in (("a_small", (8, 4), "shared.png"), ("b_large", (64, 32), "own.png"),
+                                    ("c_medium", (24, 12), "shared.png")):
+        pos, tris, uv = uv_sphere(lon, lat)
+        obj = write_obj(src / f"{name}.obj", pos, tris, uv=uv)
+        obj.write_text(f"mtllib {name}.mtl\nusemtl m\n" + obj.read_text())
+        (src / f"{name}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd {image}\n")
+
+
+def test_a_model_is_encoded_and_written_as_soon_as_its_own_steps_are_done(tmp_path, monkeypatch):
+    """Locally the encode step of a model whose chain and textures are in runs before the
+    chains of other models still waiting, and its result is reported then; the outputs are
+    byte-identical to a build that runs every encode after every chain (the phased path)."""
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+
+    src = tmp_path / "src"
+    _textured_models(src)
+    _Recording.calls = []
+    monkeypatch.setattr(graph, "Executor", _Recording)
+    reported: list[tuple[str, int]] = []
+
+    def on_result(r, done, total):
+        reported.append((Path(r.source).stem, len(_Recording.calls)))
+
+    run_build([src], tmp_path / "out", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache", on_result=on_result)
+    names = [c[0].__name__ for c in _Recording.calls]
+    last_lod = max(i for i, n in enumerate(names) if n == "task_lod")
+    first_encode = names.index("task_encode")
+    assert first_encode < last_lod, names  # one model done before another's chain started
+    # the largest model (its chain handed out first) is reported before the last chain ran
+    assert dict(reported)["b_large"] <= last_lod, (reported, names)
+    assert sorted(n for n, _ in reported) == ["a_small", "b_large", "c_medium"]
+
+    monkeypatch.setattr(graph, "Executor", _Phased)
+    _Recording.calls = []
+    run_build([src], tmp_path / "out2", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache2")
+    names = [c[0].__name__ for c in _Recording.calls]
+    assert names.index("task_encode") > max(i for i, n in enumerate(names) if n == "task_lod")
+    assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
