@@ -39,3 +39,56 @@ def test_large_blocks_come_from_the_reused_heap():
     assert _mapped_bytes("off") >= block
     # kept: nothing of that size is mapped apart (the interpreter's own small maps stay below)
     assert _mapped_bytes("on") < block
+
+
+_WARM = r"""
+import sys, threading
+from assetpipe.worker_life import warm_lod_kernels
+warm_lod_kernels()
+import numba.np.arraymath as am
+print(am._HAVE_BLAS, "scipy.linalg" in sys.modules)
+# another thread, and this one after the warm-up, import scipy.linalg as usual
+got = []
+t = threading.Thread(target=lambda: got.append(__import__("scipy.linalg").linalg.norm([3.0, 4.0])))
+t.start(); t.join()
+print(got == [5.0])
+"""
+
+
+def test_warm_up_loads_the_kernels_without_scipy():
+    """The build process's warm-up skips numba's BLAS check (0.25-0.33 s: it imports
+    scipy.linalg), and only for itself: scipy still imports afterwards."""
+    out = subprocess.run([sys.executable, "-c", _WARM], check=True, capture_output=True, text=True)
+    assert out.stdout.split() == ["False", "False", "True"], out.stdout + out.stderr
+
+
+def test_no_compiled_kernel_calls_blas():
+    """Workers forked after the warm-up have numba without BLAS (above): a kernel calling
+    np.dot, np.linalg, np.matmul, np.vdot, np.inner, np.outer or ``@`` would fail to compile in
+    them. Every numba-compiled function of the project, read from its source."""
+    import ast
+    from pathlib import Path
+
+    import assetpipe
+    import assetpipe.cache
+    import assetpipe.pipelines
+    import assetpipe.renderer
+
+    roots = [Path(assetpipe.__file__).parent] + [Path(p) for m in (assetpipe.pipelines, assetpipe.cache,
+                                                                   assetpipe.renderer) for p in m.__path__]
+    kernels = 0
+    for root in roots:
+        for path in root.rglob("*.py"):
+            tree = ast.parse(path.read_text())
+            for node in ast.walk(tree):
+                if not isinstance(node, ast.FunctionDef):
+                    continue
+                decos = [ast.unparse(d) for d in node.decorator_list]
+                if not any(d.startswith(("njit", "numba.njit", "jit", "numba.jit")) for d in decos):
+                    continue
+                kernels += 1
+                for sub in ast.walk(node):
+                    bad = (isinstance(sub, ast.BinOp) and isinstance(sub.op, ast.MatMult)) or (
+                        isinstance(sub, ast.Attribute) and sub.attr in ("dot", "linalg", "matmul", "vdot", "inner", "outer"))
+                    assert not bad, f"{path}:{sub.lineno}: {node.name} uses BLAS ({ast.unparse(sub)})"
+    assert kernels >= 40, kernels  # the kernels were found (closest_point, distance_kernels, ...)
