@@ -51,6 +51,9 @@ def test_lod_tasks_start_largest_first_and_outputs_do_not_depend_on_it(tmp_path,
 
     sizes = [triangles(b) for b in blobs]
     assert len(sizes) == 3 and sizes == sorted(sizes, reverse=True), sizes
+    # the mesh steps too, by their geometry's size
+    geometry = [store.blob_path(c[2]).stat().st_size for c in _Recording.calls if c[0] is steps.task_mesh]
+    assert len(geometry) == 3 and geometry == sorted(geometry, reverse=True), geometry
     # the same models built again into a fresh folder and cache, one job: byte-identical outputs
     monkeypatch.undo()
     run_build([src], tmp_path / "out2", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache2")
