@@ -742,6 +742,8 @@ class Graph:
         model with a finished step still waits for (its textures, once its chain is in), then
         the rest largest estimated cost first. Each model's records, warnings and outputs are
         the same as with one phase after the other (:meth:`_settle`)."""
+        import heapq
+        from collections import deque
         from concurrent.futures import FIRST_COMPLETED, wait
 
         lod_jobs, lod_costs = self._lod_jobs(assets)
@@ -752,11 +754,14 @@ class Graph:
         for k in ph.to_run:
             for a in {id(o): o for o, _, _ in ph.owners[k]}.values():
                 users.setdefault(k, []).append(a)
-        queue = list(reversed(ph.order))   # popped from the end: largest first
-        encodes: list[tuple[AssetState, _Phase]] = []  # ready encode steps, in the order they got ready
-        running: dict = {}  # future -> (phase, key, asset or None)
+        # the steps not handed out yet: (0 promoted / 1 not, place in ph.order, key); a promoted
+        # key is pushed again and its older entry skipped when popped
+        heap = [(1, ph.rank[k], k) for k in ph.order]
+        handed: set[str] = set()
+        encodes: deque[tuple[AssetState, _Phase]] = deque()  # ready encode steps, in order
+        running: dict = {}  # future -> (phase, key, asset whose encode step it is, or None)
         jobs = getattr(self.executor, "jobs", 1)
-        queued = [0.0]  # estimated seconds of the tasks handed out and not finished
+        queued = 0.0  # estimated seconds of the tasks handed out and not finished
 
         def ready(a: AssetState) -> None:
             """a's chain and textures are in: settle them, then its encode step (or done)."""
@@ -773,25 +778,38 @@ class Graph:
             else:
                 encodes.append((a, eph))
 
+        def more() -> bool:
+            """Whether to hand out another task now."""
+            if not running:
+                return True
+            if jobs <= 1:  # inline: each result is taken as soon as it has run
+                return False
+            return len(running) <= jobs or (queued < STREAM_QUEUED_SECONDS * jobs
+                                            and len(running) < STREAM_MAX_QUEUED)
+
         for a in assets:
             if waiting[id(a)] == 0:
                 ready(a)
-        while queue or encodes or running:
-            while (encodes or queue) and (not running or jobs > 1 and (len(running) <= jobs or (
-                    queued[0] < STREAM_QUEUED_SECONDS * jobs and len(running) < STREAM_MAX_QUEUED))):
+        while heap or encodes or running:
+            while (encodes or heap) and more():
                 if encodes:
-                    a, eph = encodes.pop(0)
+                    a, eph = encodes.popleft()
                     key = eph.order[0]
                     running[self.executor.submit(eph.to_run[key])] = (eph, key, a)
-                    queued[0] += ENCODE_SECONDS
-                else:
-                    key = queue.pop()
-                    running[self.executor.submit(ph.to_run[key])] = (ph, key, None)
-                    queued[0] += ph.cost.get(key, 0.0)
+                    queued += ENCODE_SECONDS
+                    continue
+                _, _, key = heapq.heappop(heap)
+                if key in handed:
+                    continue
+                handed.add(key)
+                running[self.executor.submit(ph.to_run[key])] = (ph, key, None)
+                queued += ph.cost.get(key, 0.0)
+            if not running:
+                continue
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for f in sorted(done, key=lambda f: running[f][1]):  # a fixed order among those done at once
                 p, key, a = running.pop(f)
-                queued[0] -= ENCODE_SECONDS if a is not None else ph.cost.get(key, 0.0)
+                queued -= ENCODE_SECONDS if a is not None else ph.cost.get(key, 0.0)
                 self._store_result(p, key, *self.executor.outcome(f))
                 if a is not None:  # an encode step
                     self._settle(p, a)
@@ -803,10 +821,9 @@ class Graph:
                     if waiting[id(u)] == 0:
                         ready(u)
                     else:  # what u still waits for (its textures, mostly) goes next
-                        mine = ph.keys_of[id(u)][1]
-                        later = [k for k in queue if k in mine]
-                        if later:
-                            queue = [k for k in queue if k not in mine] + later
+                        for k in ph.keys_of[id(u)][1]:
+                            if k in ph.to_run and k not in handed:
+                                heapq.heappush(heap, (0, ph.rank[k], k))
 
     def _sources(self, a: AssetState) -> list[dict]:
         base = a.source.parent.resolve()
