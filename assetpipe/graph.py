@@ -157,8 +157,10 @@ class Executor:
     def map(self, calls: list[tuple]) -> list[tuple[str, object, float]]:
         if self.pool is None or len(calls) <= 1:
             return [steps.call_task(fn, *args) for fn, *args in calls]
-        futures = [self.submit(call) for call in calls]
-        return [self.outcome(f) for f in futures]
+        out = [self.outcome(f) for f in [self.submit(call) for call in calls]]
+        # the steps lost with a crashed worker's pool, each run again alone: only a step that
+        # kills a worker by itself fails
+        return [self.alone(call) if r[0] == CRASHED else r for call, r in zip(calls, out)]
 
     def submit(self, call: tuple):
         """Start one task call; a future of its ``(status, value, seconds)`` (see :meth:`outcome`).
@@ -174,8 +176,9 @@ class Executor:
         return f
 
     def outcome(self, future) -> tuple[str, object, float]:
-        """A finished future's ``(status, value, seconds)``: a worker that died (killed, or a
-        native library's fault) fails the tasks it took down, and the pool is started again
+        """A finished future's ``(status, value, seconds)``. A worker that died (killed, or a
+        native library's fault) takes down the pool and every task in it: those come back with
+        status :data:`CRASHED`, to be run again with :meth:`alone`, and the pool is started again
         (once per broken pool)."""
         from concurrent.futures.process import BrokenProcessPool
 
@@ -184,7 +187,16 @@ class Executor:
         except BrokenProcessPool:
             if getattr(future, "assetpipe_pool", None) is self.pool:
                 self._restart()
-            return ("internal", "a build worker process crashed (killed or a native library fault)", 0.0)
+            return (CRASHED, "", 0.0)
+
+    def alone(self, call: tuple) -> tuple[str, object, float]:
+        """Run a task lost with a crashed pool again, with nothing else in the pool (the caller
+        hands out nothing meanwhile): a crash now is its own, and it fails with one line."""
+        status, value, secs = self.outcome(self.submit(call))
+        if status == CRASHED:
+            return ("internal", "a build worker process crashed running this step alone (killed, or a native "
+                                "library's fault)", secs)
+        return status, value, secs
 
     def _new_pool(self):
         """A process pool whose workers die with this process (assetpipe/worker_life.py)."""
@@ -213,6 +225,9 @@ class Executor:
 LOD_SECONDS_PER_TRIANGLE = 4e-5
 TEXTURE_SECONDS_PER_BYTE = 2e-6
 EMBEDDED_IMAGE_BYTES = 250_000  # an embedded image's size is not looked up: a typical one
+#: the status :meth:`Executor.outcome` gives a task lost with a crashed worker's pool (never stored:
+#: the task is run again alone)
+CRASHED = "crashed"
 ENCODE_SECONDS = 0.01  # an encode step, as estimated for handing out (most take 1-30 ms)
 # The streamed last phase (Graph._finish_streamed) keeps handing out tasks while those handed out
 # hold less than this much estimated work a worker, at most STREAM_MAX_QUEUED of them. With one
@@ -762,6 +777,7 @@ class Graph:
         running: dict = {}  # future -> (phase, key, asset whose encode step it is, or None)
         jobs = getattr(self.executor, "jobs", 1)
         queued = 0.0  # estimated seconds of the tasks handed out and not finished
+        lost: list[tuple[_Phase, str, AssetState | None]] = []  # lost with a crashed pool
 
         def ready(a: AssetState) -> None:
             """a's chain and textures are in: settle them, then its encode step (or done)."""
@@ -780,6 +796,8 @@ class Graph:
 
         def more() -> bool:
             """Whether to hand out another task now."""
+            if lost:  # until the tasks lost with a crashed pool have run again, alone
+                return False
             if not running:
                 return True
             if jobs <= 1:  # inline: each result is taken as soon as it has run
@@ -787,10 +805,28 @@ class Graph:
             return len(running) <= jobs or (queued < STREAM_QUEUED_SECONDS * jobs
                                             and len(running) < STREAM_MAX_QUEUED)
 
+        def finished(p: _Phase, key: str, a: AssetState | None, res: tuple) -> None:
+            """A task's result: stored; an encode step's model is done, a chain's or a
+            texture's models get ready or have what they still wait for go next."""
+            self._store_result(p, key, *res)
+            if a is not None:  # an encode step
+                self._settle(p, a)
+                self._after_encode(a)
+                on_done(a)
+                return
+            for u in users.get(key, ()):
+                waiting[id(u)] -= 1
+                if waiting[id(u)] == 0:
+                    ready(u)
+                else:  # what u still waits for (its textures, mostly) goes next
+                    for k in ph.keys_of[id(u)][1]:
+                        if k in ph.to_run and k not in handed:
+                            heapq.heappush(heap, (0, ph.rank[k], k))
+
         for a in assets:
             if waiting[id(a)] == 0:
                 ready(a)
-        while heap or encodes or running:
+        while heap or encodes or running or lost:
             while (encodes or heap) and more():
                 if encodes:
                     a, eph = encodes.popleft()
@@ -805,25 +841,20 @@ class Graph:
                 running[self.executor.submit(ph.to_run[key])] = (ph, key, None)
                 queued += ph.cost.get(key, 0.0)
             if not running:
+                if lost:  # the pool is empty: each lost task again, alone
+                    for p, key, a in sorted(lost, key=lambda t: t[1]):
+                        finished(p, key, a, self.executor.alone(p.to_run[key]))
+                    lost.clear()
                 continue
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             for f in sorted(done, key=lambda f: running[f][1]):  # a fixed order among those done at once
                 p, key, a = running.pop(f)
                 queued -= ENCODE_SECONDS if a is not None else ph.cost.get(key, 0.0)
-                self._store_result(p, key, *self.executor.outcome(f))
-                if a is not None:  # an encode step
-                    self._settle(p, a)
-                    self._after_encode(a)
-                    on_done(a)
-                    continue
-                for u in users.get(key, ()):
-                    waiting[id(u)] -= 1
-                    if waiting[id(u)] == 0:
-                        ready(u)
-                    else:  # what u still waits for (its textures, mostly) goes next
-                        for k in ph.keys_of[id(u)][1]:
-                            if k in ph.to_run and k not in handed:
-                                heapq.heappush(heap, (0, ph.rank[k], k))
+                res = self.executor.outcome(f)
+                if res[0] == CRASHED:
+                    lost.append((p, key, a))
+                else:
+                    finished(p, key, a, res)
 
     def _sources(self, a: AssetState) -> list[dict]:
         base = a.source.parent.resolve()

@@ -4,9 +4,12 @@ bytes."""
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from assetpipe import graph, steps
 from assetpipe.cache.serialize import unpack
@@ -157,3 +160,68 @@ def test_a_model_is_encoded_and_written_as_soon_as_its_own_steps_are_done(tmp_pa
     names = [c[0].__name__ for c in _Recording.calls]
     assert names.index("task_encode") > max(i for i, n in enumerate(names) if n == "task_lod")
     assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
+
+
+# -- a worker killed by one model's step (a native crash) fails that model alone ------------
+
+_CRASH_ON = Path("/nonexistent")  # set by the test: a file holding the blob whose step kills its worker
+_PARENT = [0]
+_REAL = {"lod": steps.task_lod, "mesh": steps.task_mesh}
+
+
+def _crash_if_chosen(blob: str) -> None:
+    """The worker dies (SIGKILL), as a native library's fault would kill it, when given the
+    chosen blob (never the test process itself)."""
+    import signal
+
+    if _CRASH_ON.is_file() and blob == _CRASH_ON.read_text() and os.getpid() != _PARENT[0]:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _crashing_task_lod(store_root, blob, *args):
+    _crash_if_chosen(blob)
+    return _REAL["lod"](store_root, blob, *args)
+
+
+def _crashing_task_mesh(store_root, blob, *args):
+    _crash_if_chosen(blob)
+    return _REAL["mesh"](store_root, blob, *args)
+
+
+# pickled by name as the real steps, which the test points here in this process and so in the
+# workers it forks
+_crashing_task_lod.__module__, _crashing_task_lod.__qualname__ = "assetpipe.steps", "task_lod"
+_crashing_task_mesh.__module__, _crashing_task_mesh.__qualname__ = "assetpipe.steps", "task_mesh"
+
+
+@pytest.mark.parametrize("step", ["mesh", "lod"])
+def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, monkeypatch, step):
+    """Four models' mesh (a phase) or LOD steps (the streamed phase) are in the pool when one
+    model's step kills its worker: the others' steps, lost with the pool, are run again alone
+    and build; the model whose step kills a worker even alone fails with one line saying so.
+    (Before, every step still in the pool failed with it.)"""
+    import json
+
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+
+    global _CRASH_ON
+    src = tmp_path / "src"
+    src.mkdir()
+    for name, (lon, lat) in {"a": (16, 8), "bad": (24, 12), "c": (20, 10), "d": (12, 6)}.items():
+        pos, tris, _ = uv_sphere(lon, lat)
+        write_obj(src / f"{name}.obj", pos, tris)
+    # the bad model's mesh blob, from a build of it alone (blobs are content-addressed)
+    run_build([src / "bad.obj"], tmp_path / "probe", BuildOptions(), jobs=1, cache_dir=tmp_path / "probe-cache")
+    explain = json.loads((tmp_path / "probe" / ".assetpipe" / "explain.json").read_text())
+    (entry,) = explain["steps"].values()
+    marker = tmp_path / "crash-on"
+    marker.write_text(entry[step]["inputs"]["mesh" if step == "lod" else "geometry"])
+    monkeypatch.setattr(steps, f"task_{step}", {"lod": _crashing_task_lod, "mesh": _crashing_task_mesh}[step])
+    monkeypatch.setattr(sys.modules[__name__], "_CRASH_ON", marker)
+    _PARENT[0] = os.getpid()
+    report = run_build([src], tmp_path / "out", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache")
+    status = {Path(r.source).stem: (r.status, r.error) for r in report.results}
+    assert status["bad"][0] == "failed" and "worker process crashed running this step alone" in status["bad"][1], status
+    assert f"step {step}" in status["bad"][1], status
+    assert all(status[n][0] == "built" for n in ("a", "c", "d")), status
