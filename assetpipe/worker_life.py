@@ -116,17 +116,17 @@ def warm_lod_kernels() -> None:
     (:meth:`assetpipe.graph.Executor.warm`). A small sphere's chain, measured, on the native
     simplifier alone: neither the WASM runtime nor OpenCV, which start threads that a fork must
     not copy."""
-    import numpy as np
-
     finder = _NoBlasCheck()
     sys.meta_path.insert(0, finder)
     try:
-        _warm_chain(np)
+        _warm_chain()
     finally:
         sys.meta_path.remove(finder)
 
 
-def _warm_chain(np) -> None:
+def _warm_chain() -> None:
+    import numpy as np
+
     from assetpipe.pipelines.lod import LodOptions, build_lod_chain
 
     u, v = np.meshgrid(np.linspace(0.0, np.pi, 13), np.linspace(0.0, 2.0 * np.pi, 25), indexing="ij")

@@ -205,7 +205,6 @@ def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, mon
     from assetpipe.build import run_build
     from assetpipe.options import BuildOptions
 
-    global _CRASH_ON
     src = tmp_path / "src"
     src.mkdir()
     for name, (lon, lat) in {"a": (16, 8), "bad": (24, 12), "c": (20, 10), "d": (12, 6)}.items():
@@ -219,7 +218,7 @@ def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, mon
     marker.write_text(entry[step]["inputs"]["mesh" if step == "lod" else "geometry"])
     monkeypatch.setattr(steps, f"task_{step}", {"lod": _crashing_task_lod, "mesh": _crashing_task_mesh}[step])
     monkeypatch.setattr(sys.modules[__name__], "_CRASH_ON", marker)
-    _PARENT[0] = os.getpid()
+    monkeypatch.setattr(sys.modules[__name__], "_PARENT", [os.getpid()])
     report = run_build([src], tmp_path / "out", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache")
     status = {Path(r.source).stem: (r.status, r.error) for r in report.results}
     assert status["bad"][0] == "failed" and "worker process crashed running this step alone" in status["bad"][1], status
