@@ -477,16 +477,66 @@ def _premultiply(w16: np.ndarray) -> np.ndarray:
     return pre
 
 
+@njit(cache=True, nogil=True)
+def _premultiply_rows(rgba, colour16):
+    """uint8 RGBA rows (n, 4) -> (float32 (n, 4) linear (R*A, G*A, B*A, A), uint16 (n, 3) linear
+    colour): :func:`_premultiply` of :func:`_to_work16` and the working colour, in one pass,
+    bit for bit (``colour16``: (256,) uint16, the colour channels' table; alpha is x 257)."""
+    n = rgba.shape[0]
+    pre = np.empty((n, 4), np.float32)
+    straight = np.empty((n, 3), np.uint16)
+    inv = np.float32(1.0 / 65535.0)
+    for i in range(n):
+        a = np.float32(np.uint16(rgba[i, 3]) * np.uint16(257)) * inv
+        for c in range(3):
+            w = colour16[rgba[i, c]]
+            straight[i, c] = w
+            pre[i, c] = (np.float32(w) * inv) * a
+        pre[i, 3] = a
+    return pre, straight
+
+
+@njit(cache=True, nogil=True)
+def _unpremultiply_rows(pre, straight, scale, srgb8):
+    """One level of :func:`_premultiplied_chain`, compiled: float32 (n, 4) premultiplied rows and
+    uint16 (n, 3) straight colour -> uint8 (n, 4) sRGB colour (``srgb8``: (65536,) uint8, the
+    encoding table) and alpha x ``scale`` (float32; 1: unscaled), each rounded as the numpy
+    expressions it replaced, bit for bit: colour = rint(clip(pre / alpha, 0, 1) x 65535), the
+    straight colour where alpha <= 0.5 / 65535; alpha rint(clip(alpha x scale, 0, 1) x 255)."""
+    n = pre.shape[0]
+    out = np.empty((n, 4), np.uint8)
+    empty = np.float32(0.5 / 65535.0)
+    zero, one, top16, top8 = np.float32(0.0), np.float32(1.0), np.float32(65535.0), np.float32(255.0)
+    for i in range(n):
+        a = pre[i, 3]
+        if a <= empty:
+            for c in range(3):
+                out[i, c] = srgb8[straight[i, c]]
+        else:
+            for c in range(3):
+                v = pre[i, c] / a
+                out[i, c] = srgb8[np.uint16(np.rint(min(max(v, zero), one) * top16))]
+        out[i, 3] = np.uint8(np.rint(min(max(a * scale, zero), one) * top8))
+    return out
+
+
 def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str, alpha_cutoff: float,
                          first: int = 0) -> tuple[list[np.ndarray | None], tuple[float | None, ...] | None]:
     """Alpha-weighted colour filtering (float32), alpha linear, optional coverage scaling.
     ``first`` > 0: levels above it are dropped (``None``), level 0's working copies (float32
     and 16-bit) are never made whole."""
-    if first:
+    if first:  # (level 0 is dropped: its working copies are made band by band, never whole)
         pres = _chain_dropping(rgba, lambda band: _premultiply(_to_work16(band, srgb)), sizes, first)
         straights = _chain_dropping(rgba, lambda band: _to_work16(band, srgb)[..., :3].copy(), sizes, first)
         alpha0 = rgba[..., 3] if rgba.dtype == np.uint8 else _u16_to_u8(np.ascontiguousarray(rgba[..., 3]))
         level0 = None
+    elif rgba.dtype == np.uint8:
+        h0, w0 = rgba.shape[:2]
+        pre0, straight0 = _premultiply_rows(rgba.reshape(-1, 4), _LIN16_FROM_SRGB8 if srgb else _ID16_FROM_8)
+        pres = _chain(pre0.reshape(h0, w0, 4), sizes)  # premultiplied colour + alpha
+        straights = _chain(straight0.reshape(h0, w0, 3), sizes)  # unweighted colour for fully transparent texels
+        level0 = rgba.view()
+        alpha0 = level0[..., 3]
     else:
         w16 = _to_work16(rgba, srgb)
         pres = _chain(_premultiply(w16), sizes)          # premultiplied colour + alpha
@@ -509,6 +559,17 @@ def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str, a
                 coverage.append(None)
             continue
         alpha = pre_k[..., 3]
+        if srgb:  # baseColor, the one role filtered so: compiled, the same bytes
+            scale = np.float32(1.0)
+            if cutoff8 is not None:
+                scale = _coverage_scale(alpha, target, cutoff8)
+            lv = _unpremultiply_rows(np.ascontiguousarray(pre_k).reshape(-1, 4),
+                                     np.ascontiguousarray(straight_k).reshape(-1, 3), scale,
+                                     _SRGB8_FROM_LIN16).reshape(alpha.shape + (4,))
+            if coverage is not None:
+                coverage.append(float(np.count_nonzero(lv[..., 3] >= cutoff8)) / alpha.size)
+            out.append(lv)
+            continue
         empty = alpha <= (0.5 / 65535.0)
         colour = np.divide(pre_k[..., :3], alpha[..., None], out=np.zeros(alpha.shape + (3,), np.float32),
                            where=~empty[..., None])
@@ -533,7 +594,14 @@ def _cutoff_threshold8(alpha_cutoff: float) -> int:
 
 def _scale_alpha_for_coverage(alpha: np.ndarray, target: float, cutoff8: int) -> np.ndarray:
     """Scale ``alpha`` (h, w) float32 in [0, 1] so that the fraction of texels whose rounded
-    8-bit value is >= ``cutoff8`` is as close as possible to ``target``.
+    8-bit value is >= ``cutoff8`` is as close as possible to ``target``
+    (x :func:`_coverage_scale`)."""
+    s = _coverage_scale(alpha, target, cutoff8)
+    return alpha if s == 1.0 else alpha * s
+
+
+def _coverage_scale(alpha: np.ndarray, target: float, cutoff8: int) -> np.float32:
+    """The float32 factor of :func:`_scale_alpha_for_coverage` (1: unscaled).
 
     A texel passes when ``rint(alpha * s * 255) >= cutoff8``, i.e. ``alpha >= t / s`` with
     ``t = (cutoff8 - 0.5) / 255``; coverage is monotone in ``s``, so the best ``s`` puts the
@@ -542,22 +610,20 @@ def _scale_alpha_for_coverage(alpha: np.ndarray, target: float, cutoff8: int) ->
     """
     n = alpha.size
     if cutoff8 <= 0 or cutoff8 > 255 or target <= 0.0 or target >= 1.0 or n == 0:
-        return alpha
+        return np.float32(1.0)
     k = int(round(target * n))
     flat = alpha.reshape(-1)
     if k <= 0:
         kth = float(flat.max())
         if kth <= 0.0:
-            return alpha
+            return np.float32(1.0)
         thr = (cutoff8 - 0.5) / 255.0
-        s = thr / kth * (1.0 - 1e-6)  # everything just below the threshold
-        return alpha * np.float32(s)
+        return np.float32(thr / kth * (1.0 - 1e-6))  # everything just below the threshold
     kth = float(np.partition(flat, n - k)[n - k])  # the k-th largest
     if kth <= 0.0:
-        return alpha  # coverage cannot be raised by scaling zeros
+        return np.float32(1.0)  # coverage cannot be raised by scaling zeros
     thr = (cutoff8 - 0.5) / 255.0
-    s = thr / kth * (1.0 + 1e-6)  # kth (and all above it) pass
-    return alpha * np.float32(s)
+    return np.float32(thr / kth * (1.0 + 1e-6))  # kth (and all above it) pass
 
 
 def normal_unit_levels(rgba: np.ndarray, first: int = 0) -> list[np.ndarray | None]:
