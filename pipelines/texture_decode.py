@@ -121,7 +121,7 @@ def _check_png_stream(image: ImageSource) -> None:
                 break
             pos += 12 + length
     except zlib.error as exc:
-        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt 16-bit PNG ({exc})") from None
+        raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt PNG ({exc})") from None
     bits = depth * _PNG_CHANNELS[colour]  # per pixel
     if interlace:  # Adam7: seven passes, each of its own rows and columns
         passes = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))

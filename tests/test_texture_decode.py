@@ -294,3 +294,35 @@ def test_pillows_complaints_about_metadata_stay_out_of_the_output():
         warnings.simplefilter("always")
         rgba = decode_image(src)
     assert rgba.shape == (16, 16, 4) and seen == []
+
+
+def test_a_small_png_claiming_a_large_image_is_refused_before_its_pixels_are_allocated():
+    """Within max_pixels, but its stream holds 64 of 4096 rows: the stream is inflated first
+    and the missing pixel data refused, with no image allocated (a 4096^2 RGBA header over a
+    file of about 1 KiB claims 64 MiB)."""
+    import tracemalloc
+
+    data = raw_png(4096, 4096, 8, 6, bytes(64 * (1 + 4096 * 4)))
+    tracemalloc.start()
+    try:
+        with pytest.raises(InvalidTextureError, match="corrupt or truncated PNG .its pixel data holds"):
+            decode_image(source(data))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 << 20, peak
+
+
+
+def test_an_8bit_png_whose_stream_does_not_inflate_is_not_called_16bit():
+    """A zlib error in the pixel stream (chunk CRCs valid) names the problem without calling an
+    8-bit PNG a 16-bit one (the message said "16-bit" for every PNG before)."""
+    good = raw_png(8, 8, 8, 2, bytes(8 * (1 + 8 * 3)))
+    at = good.index(b"IDAT") + 4
+    body = b"\x78\x9c\xff\xff\xff\xff" + b"\x00" * 8
+    length = struct.unpack(">I", good[at - 8:at - 4])[0]
+    bad = (good[:at - 8] + struct.pack(">I", len(body)) + b"IDAT" + body
+           + struct.pack(">I", zlib.crc32(b"IDAT" + body)) + good[at + length + 4:])
+    with pytest.raises(InvalidTextureError, match=r"t.png' is a corrupt PNG \(") as err:
+        decode_image(source(bad))
+    assert "16-bit" not in str(err.value)
