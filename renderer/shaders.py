@@ -18,7 +18,9 @@ from assetpipe.core.errors import RenderError
 
 from ._vk import INSTALL_HINT, cache_root
 
-SHADER_DIR = Path(__file__).resolve().parent / "shaders"
+# the GLSL sources (not in a folder named shaders/: beside this module, setuptools takes such a
+# folder for a second package of the same name and warns that it is not installed as one)
+SHADER_DIR = Path(__file__).resolve().parent / "glsl"
 
 
 def default_cache_dir() -> Path:
@@ -55,5 +57,5 @@ def compile_glsl(source_path: Path, cache_dir: Path | None = None, defines: tupl
 
 
 def shader_path(name: str) -> Path:
-    """The packaged shader ``renderer/shaders/<name>``."""
+    """The packaged shader ``renderer/glsl/<name>``."""
     return SHADER_DIR / name
