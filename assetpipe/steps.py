@@ -212,6 +212,15 @@ def material_groups(materials: list[dict], mesh_materials: list[int]) -> list[in
     return [canon[m] if 0 <= m < len(canon) else m for m in mesh_materials]
 
 
+def _wasm_cache_in(store: Store) -> None:
+    """The WASM simplifier's compiled module is kept in the build cache (``wasmtime/`` beside
+    ``objects/``), like everything else the build writes besides its outputs: nothing lands in
+    ``~/.cache``."""
+    from assetpipe.pipelines import meshopt_wasm
+
+    meshopt_wasm.use_compile_cache(store.root / "wasmtime")
+
+
 def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: dict | None,
              double_sided: list[bool] | None = None, threads: int | None = None,
              groups: list[int] | None = None) -> dict:
@@ -226,6 +235,7 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
     from assetpipe.pipelines.mesh_process import ATTRIBUTE_COMPONENTS
 
     store = Store(Path(store_root))
+    _wasm_cache_in(store)
     data = store.get_blob(mesh_digest)
     if data is None:
         raise FileNotFoundError(mesh_digest)
@@ -292,6 +302,7 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
     from assetpipe.pipelines.surface_error import measure_error
 
     store = Store(Path(store_root))
+    _wasm_cache_in(store)
     opts = options_from_json(LodOptions, lod_options) or LodOptions()
     levels = []
     for d in mesh_digests:

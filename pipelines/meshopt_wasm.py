@@ -45,12 +45,13 @@ PRUNE = 8
 REGULARIZE = 16
 PERMISSIVE = 32
 
-#: wasmtime's own cache of compiled modules (``$XDG_CACHE_HOME/wasmtime``, else
-#: ``~/.cache/wasmtime``; keyed by the module's bytes, wasmtime's version and the CPU's
+#: wasmtime's own cache of compiled modules, in the folder :func:`use_compile_cache` names (the
+#: build cache's ``wasmtime/``; keyed by the module's bytes, wasmtime's version and the CPU's
 #: features): each LOD worker process otherwise compiles the module again, 0.09-0.12 s of CPU
-#: (on threads) against 0.006 s to load it from the cache. Where the cache cannot be set up the
-#: module is compiled as before.
+#: (on threads) against 0.006 s to load it from the cache. Without a folder, or where the cache
+#: cannot be set up, the module is compiled as before.
 COMPILE_CACHE = True
+_cache_dir: list = []  # [folder] once use_compile_cache named one
 
 #: bytes of WASM memory one instance may grow to (wasm32 addresses 4 GiB at most); a mesh that
 #: needs more fails with :class:`SimplifierFailed` and its level is made without moved vertices
@@ -190,14 +191,30 @@ def reset() -> None:
         _idle.clear()
 
 
+def use_compile_cache(directory) -> None:
+    """Keep wasmtime's compiled module in ``directory`` (made when needed): the engine this
+    process makes next (its first simplification) loads it from there or compiles it there.
+    Nothing is written elsewhere (not in ``~/.cache``, wasmtime's default)."""
+    with _lock:
+        _cache_dir[:] = [Path(directory)]
+
+
 def _config(wasmtime):
-    """The engine's configuration: wasmtime's compile cache on (:data:`COMPILE_CACHE`) where
-    it can be."""
+    """The engine's configuration: wasmtime's compile cache in :func:`use_compile_cache`'s
+    folder (:data:`COMPILE_CACHE`), where one is named and it can be set up."""
     config = wasmtime.Config()
-    if COMPILE_CACHE:
+    if COMPILE_CACHE and _cache_dir:
+        folder = _cache_dir[0]
         try:
-            config.cache = True
-        except Exception:  # noqa: BLE001 - wasmtime raises its own error type for a bad cache setup
+            folder.mkdir(parents=True, exist_ok=True)
+            toml = folder / "config.toml"
+            text = f"[cache]\ndirectory = {json.dumps(str(folder))}\n"
+            if not toml.is_file() or toml.read_text() != text:  # written whole (workers race)
+                tmp = folder / f".config.{os.getpid()}.{threading.get_ident()}.tmp"
+                tmp.write_text(text)
+                os.replace(tmp, toml)
+            config.cache = str(toml)
+        except Exception:  # noqa: BLE001 - an unwritable folder, wasmtime's own error type: compile as before
             config = wasmtime.Config()
     return config
 

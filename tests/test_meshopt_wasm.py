@@ -120,29 +120,34 @@ def test_a_missing_simplifier_is_named_when_levels_would_move(monkeypatch, tmp_p
     assert lod_move_note(None) is None  # --no-lod
 
 
-def test_a_second_process_loads_the_compiled_module_from_wasmtimes_cache(tmp_path):
-    """The module is compiled once per machine, not once per worker process: the first
-    process writes wasmtime's cache (under XDG_CACHE_HOME), a second one finds it there and
-    simplifies to the same result."""
+def test_a_second_process_loads_the_compiled_module_from_the_cache_folder(tmp_path):
+    """The module is compiled once per cache, not once per worker process: the first process
+    writes wasmtime's cache in the folder use_compile_cache names (the build cache's), a second
+    one finds it there and simplifies to the same result; nothing lands in XDG_CACHE_HOME."""
     import os
     import subprocess
     import sys
 
-    code = ("import numpy as np, trimesh\n"
+    folder = tmp_path / "cache" / "wasmtime"
+    code = ("import sys, numpy as np, trimesh\n"
             "from assetpipe.pipelines import meshopt_wasm\n"
+            "meshopt_wasm.use_compile_cache(sys.argv[1])\n"
             "m = trimesh.creation.icosphere(4)\n"
             "out, moved, err = meshopt_wasm.simplify_with_update(m.vertices.astype(np.float32), "
             "m.faces.astype(np.uint32), len(m.faces) // 4)\n"
             "print(out.tobytes().hex()[:64], moved.tobytes().hex()[:64], err)\n")
-    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
-    first = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {**os.environ, "XDG_CACHE_HOME": str(home / "xdg"), "HOME": str(home)}
+    run = [sys.executable, "-c", code, str(folder)]
+    first = subprocess.run(run, env=env, capture_output=True, text=True, check=True)
     # the compiled module (beside it, a ``.stats`` file of uses, rewritten at every load)
-    written = sorted(p for p in (tmp_path / "wasmtime" / "modules").rglob("*")
-                     if p.is_file() and p.suffix != ".stats")
-    assert written, "wasmtime wrote no compiled module to its cache"
+    written = sorted(p for p in (folder / "modules").rglob("*") if p.is_file() and p.suffix != ".stats")
+    assert written, "wasmtime wrote no compiled module to the cache folder"
     stamps = [p.stat().st_mtime_ns for p in written]
-    second = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    second = subprocess.run(run, env=env, capture_output=True, text=True, check=True)
     assert second.stdout == first.stdout and first.stdout.strip()
     assert first.stderr == second.stderr == ""
     # the second process read the entry (it did not compile and write it again)
     assert [p.stat().st_mtime_ns for p in written] == stamps
+    assert list(home.rglob("*")) == []
