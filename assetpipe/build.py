@@ -256,6 +256,13 @@ def _build_changed(todo, why, out_dir, store, stat, state, jobs, by_key, on_resu
     try:
         graph.build(assets, on_done=finish)
     except AssetpipeError:  # the cache is unusable, ...: the whole build stops with its one line
+        # the models already written keep their state (their entries, as after a full build; the
+        # others keep their earlier ones and outputs), so the next build does not build them again
+        if finished:
+            try:
+                state.save(explain_steps)
+            except OSError:
+                pass  # the output folder is unusable too: the build's own error says what stopped it
         raise
     except Exception as exc:  # a bug of ours between steps: every unfinished asset fails, the report is written
         for a in assets:

@@ -455,3 +455,44 @@ def test_a_file_name_that_is_not_utf8_fails_alone(tmp_path):
     assert by_status["built"]["id"] == "good" and (out / "good.json").is_file()
     assert "bad\\xffname.obj: the file name is not valid UTF-8" in by_status["failed"]["error"]
     assert "bad\\xffname.obj: the file name is not valid UTF-8" in r.output
+
+
+def test_a_fatal_error_after_some_models_were_written_keeps_their_state(tmp_path, monkeypatch):
+    """The cache failing in the middle of the last steps stops the build with its one error; the
+    models already written keep their state entries, so the next build takes them as up to date
+    (it neither builds nor rewrites them) and builds the rest."""
+    from assetpipe.build import run_build
+    from assetpipe.core.errors import CacheError
+    from assetpipe.graph import Graph
+    from assetpipe.options import BuildOptions
+
+    cube = "".join(f"v {x} {y} {z}\n" for x in (0, 1) for y in (0, 1) for z in (0, 1)) + (
+        "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n")
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in ("a", "b", "c"):
+        (src / f"{name}.obj").write_text(cube)
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    real = Graph.build
+    written: list[str] = []
+
+    def failing(self, assets, on_done=None):
+        def done(a):
+            on_done(a)
+            written.append(a.id)
+            raise CacheError("the cache folder became unusable (simulated)")
+        return real(self, assets, on_done=done)
+
+    monkeypatch.setattr(Graph, "build", failing)
+    with pytest.raises(CacheError, match="simulated"):
+        run_build([src], out, BuildOptions(), jobs=1, cache_dir=cache)
+    assert len(written) == 1 and (out / f"{written[0]}.json").is_file()
+    first = out / f"{written[0]}.idx"
+    stamp = first.stat().st_mtime_ns
+    monkeypatch.setattr(Graph, "build", real)
+    report = run_build([src], out, BuildOptions(), jobs=1, cache_dir=cache)
+    status = {r.id: (r.status, r.reason) for r in report.results}
+    # up to date from the state file: not looked up step by step in the cache
+    assert status[written[0]] == ("cached", "up to date") and sorted(status) == ["a", "b", "c"], status
+    assert all(s == "built" or r.startswith("results cached") for i, (s, r) in status.items() if i != written[0]), status
+    assert first.stat().st_mtime_ns == stamp  # not written again
