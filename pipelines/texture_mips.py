@@ -134,6 +134,8 @@ _ID16_FROM_8 = (np.arange(256, dtype=np.uint16) * 257).astype(np.uint16)
 # 4-channel tables for cv2.LUT: colour via sRGB, alpha linear; or all linear.
 _LUT_SRGB_RGB_LIN_A = np.stack([_LIN16_FROM_SRGB8] * 3 + [_ID16_FROM_8], axis=-1).reshape(1, 256, 4)
 _SRGB8_FROM_LIN16 = np.rint(linear_to_srgb(np.arange(65536) / 65535.0) * 255.0).astype(np.uint8)
+# x / 257 rounded: the same as _u16_to_u8 (cv2.convertScaleAbs) for every 16-bit value
+_LIN8_FROM_LIN16 = np.rint(np.arange(65536) / 257.0).astype(np.uint8)
 _LIN16_FROM_SRGB16: np.ndarray | None = None  # built on first use (16-bit sRGB sources are rare)
 
 
@@ -499,8 +501,8 @@ def _premultiply_rows(rgba, colour16):
 @njit(cache=True, nogil=True)
 def _unpremultiply_rows(pre, straight, scale, srgb8):
     """One level of :func:`_premultiplied_chain`, compiled: float32 (n, 4) premultiplied rows and
-    uint16 (n, 3) straight colour -> uint8 (n, 4) sRGB colour (``srgb8``: (65536,) uint8, the
-    encoding table) and alpha x ``scale`` (float32; 1: unscaled), each rounded as the numpy
+    uint16 (n, 3) straight colour -> uint8 (n, 4) colour (``srgb8``: (65536,) uint8, the encoding
+    table: sRGB, or linear for a role stored linear) and alpha x ``scale`` (float32; 1: unscaled), each rounded as the numpy
     expressions it replaced, bit for bit: colour = rint(clip(pre / alpha, 0, 1) x 65535), the
     straight colour where alpha <= 0.5 / 65535; alpha rint(clip(alpha x scale, 0, 1) x 255)."""
     n = pre.shape[0]
@@ -559,28 +561,12 @@ def _premultiplied_chain(rgba: np.ndarray, srgb: bool, sizes, alpha_mode: str, a
                 coverage.append(None)
             continue
         alpha = pre_k[..., 3]
-        if srgb:  # baseColor, the one role filtered so: compiled, the same bytes
-            scale = np.float32(1.0)
-            if cutoff8 is not None:
-                scale = _coverage_scale(alpha, target, cutoff8)
-            lv = _unpremultiply_rows(np.ascontiguousarray(pre_k).reshape(-1, 4),
-                                     np.ascontiguousarray(straight_k).reshape(-1, 3), scale,
-                                     _SRGB8_FROM_LIN16).reshape(alpha.shape + (4,))
-            if coverage is not None:
-                coverage.append(float(np.count_nonzero(lv[..., 3] >= cutoff8)) / alpha.size)
-            out.append(lv)
-            continue
-        empty = alpha <= (0.5 / 65535.0)
-        colour = np.divide(pre_k[..., :3], alpha[..., None], out=np.zeros(alpha.shape + (3,), np.float32),
-                           where=~empty[..., None])
-        colour16 = np.rint(np.clip(colour, 0.0, 1.0) * 65535.0).astype(np.uint16)
-        if empty.any():
-            colour16[empty] = straight_k[empty]
-        lv = np.empty(alpha.shape + (4,), dtype=np.uint8)
-        lv[..., :3] = _SRGB8_FROM_LIN16[colour16] if srgb else _u16_to_u8(colour16)
+        scale = np.float32(1.0)
         if cutoff8 is not None:
-            alpha = _scale_alpha_for_coverage(alpha, target, cutoff8)
-        lv[..., 3] = np.rint(np.clip(alpha, 0.0, 1.0) * 255.0).astype(np.uint8)
+            scale = _coverage_scale(alpha, target, cutoff8)
+        lv = _unpremultiply_rows(np.ascontiguousarray(pre_k).reshape(-1, 4),
+                                 np.ascontiguousarray(straight_k).reshape(-1, 3), scale,
+                                 _SRGB8_FROM_LIN16 if srgb else _LIN8_FROM_LIN16).reshape(alpha.shape + (4,))
         if coverage is not None:
             coverage.append(float(np.count_nonzero(lv[..., 3] >= cutoff8)) / alpha.size)
         out.append(lv)
@@ -592,16 +578,10 @@ def _cutoff_threshold8(alpha_cutoff: float) -> int:
     return int(min(256, max(0, math.ceil(alpha_cutoff * 255.0 - 1e-9))))
 
 
-def _scale_alpha_for_coverage(alpha: np.ndarray, target: float, cutoff8: int) -> np.ndarray:
-    """Scale ``alpha`` (h, w) float32 in [0, 1] so that the fraction of texels whose rounded
-    8-bit value is >= ``cutoff8`` is as close as possible to ``target``
-    (x :func:`_coverage_scale`)."""
-    s = _coverage_scale(alpha, target, cutoff8)
-    return alpha if s == 1.0 else alpha * s
-
-
 def _coverage_scale(alpha: np.ndarray, target: float, cutoff8: int) -> np.float32:
-    """The float32 factor of :func:`_scale_alpha_for_coverage` (1: unscaled).
+    """The float32 factor that scales ``alpha`` (h, w) float32 in [0, 1] so that the fraction of
+    texels whose rounded 8-bit value is >= ``cutoff8`` is as close as possible to ``target``
+    (1: unscaled).
 
     A texel passes when ``rint(alpha * s * 255) >= cutoff8``, i.e. ``alpha >= t / s`` with
     ``t = (cutoff8 - 0.5) / 255``; coverage is monotone in ``s``, so the best ``s`` puts the

@@ -18,8 +18,8 @@ from assetpipe.core.errors import RenderError
 
 from ._vk import INSTALL_HINT, cache_root
 
-# the GLSL sources (not in a folder named shaders/: beside this module, setuptools takes such a
-# folder for a second package of the same name and warns that it is not installed as one)
+# the GLSL sources: a data package of their own (pyproject.toml lists assetpipe.renderer.glsl;
+# named apart from this module, which a package "shaders" beside it would share its name with)
 SHADER_DIR = Path(__file__).resolve().parent / "glsl"
 
 

@@ -498,3 +498,12 @@ def test_compiled_premultiplied_levels_equal_the_numpy_expressions(alpha_mode):
         assert np.array_equal(got, want)
     if alpha_mode == "MASK":
         assert chain.coverage == tuple(cov) and len(set(cov)) > 1
+
+
+def test_the_linear_16_to_8_table_equals_the_opencv_conversion():
+    """The premultiplied kernel's linear encoding table rounds every 16-bit value as
+    _u16_to_u8 (OpenCV) does, so a linear role's levels would not change by taking it."""
+    from assetpipe.pipelines import texture_mips as tm
+
+    x = np.arange(65536, dtype=np.uint16)
+    assert np.array_equal(tm._LIN8_FROM_LIN16, tm._u16_to_u8(x).reshape(-1))
