@@ -191,12 +191,23 @@ class Executor:
 
     def alone(self, call: tuple) -> tuple[str, object, float]:
         """Run a task lost with a crashed pool again, with nothing else in the pool (the caller
-        hands out nothing meanwhile): a crash now is its own, and it fails with one line."""
-        status, value, secs = self.outcome(self.submit(call))
+        hands out nothing meanwhile): a crash now is its own, and it fails with one line. The
+        line says how the worker died: killed (SIGKILL, what the system's out-of-memory killer
+        sends: status ``"memory"``, not a bug of ours) or another signal (a native library's
+        fault: ``"internal"``)."""
+        future = self.submit(call)
+        workers = self._workers()
+        status, value, secs = self.outcome(future)
         if status == CRASHED:
-            return ("internal", "a build worker process crashed running this step alone (killed, or a native "
-                                "library's fault)", secs)
+            return _crash_outcome(_death_signal(workers), secs)
         return status, value, secs
+
+    def _workers(self) -> list:
+        """The pool's worker processes now (``multiprocessing.Process``; ProcessPoolExecutor
+        keeps them in its ``_processes``; none known if that ever changes: the crash is then
+        reported without its signal)."""
+        procs = getattr(self.pool, "_processes", None)
+        return list(procs.values()) if isinstance(procs, dict) else []
 
     def _new_pool(self):
         """A process pool whose workers die with this process (assetpipe/worker_life.py)."""
@@ -235,6 +246,40 @@ ENCODE_SECONDS = 0.01  # an encode step, as estimated for handing out (most take
 # phased build (the workers waited for this process to hand out each ~5 ms step)
 STREAM_QUEUED_SECONDS = 0.2
 STREAM_MAX_QUEUED = 64
+
+
+def _death_signal(workers: list, timeout: float = 10.0) -> int | None:
+    """The signal that killed one of ``workers`` (a broken pool's processes) other than the
+    SIGTERM the pool sends the others when it breaks, or None (none found, or not known)."""
+    import signal
+
+    for p in workers:
+        try:
+            p.join(timeout)
+            code = p.exitcode
+        except Exception:  # noqa: BLE001 - only to name the signal
+            continue
+        if code is not None and code < 0 and -code != signal.SIGTERM:
+            return -code
+    return None
+
+
+def _crash_outcome(sig: int | None, secs: float) -> tuple[str, str, float]:
+    """A step whose worker died running it alone: (status, message, seconds)."""
+    import signal
+
+    if sig == signal.SIGKILL:
+        return ("memory", "its worker process was killed (SIGKILL) running this step alone, most likely by "
+                          "the system's out-of-memory killer: the step needed more memory than was free", secs)
+    if sig is not None:
+        try:
+            name = signal.Signals(sig).name
+        except ValueError:
+            name = f"signal {sig}"
+        return ("internal", f"a build worker process crashed running this step alone ({name}: a native "
+                            "library's fault)", secs)
+    return ("internal", "a build worker process crashed running this step alone (killed, or a native "
+                        "library's fault)", secs)
 
 
 @dataclass
@@ -376,8 +421,8 @@ class Graph:
                 a.seconds += secs
                 if status == "ok":
                     continue
-                if status == "memory":
-                    value = f"out of memory in step {label}"
+                if status == "memory":  # (a worker killed by the system's out-of-memory killer: why)
+                    value = f"out of memory in step {label}" + (f" ({value})" if value != "out of memory" else "")
                 if label.startswith("texture"):
                     a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
                     if status == "internal":

@@ -166,16 +166,16 @@ def test_a_model_is_encoded_and_written_as_soon_as_its_own_steps_are_done(tmp_pa
 
 _CRASH_ON = Path("/nonexistent")  # set by the test: a file holding the blob whose step kills its worker
 _PARENT = [0]
+_SIGNAL = [9]  # set by the test: the signal the worker dies by
 _REAL = {"lod": steps.task_lod, "mesh": steps.task_mesh}
 
 
 def _crash_if_chosen(blob: str) -> None:
-    """The worker dies (SIGKILL), as a native library's fault would kill it, when given the
-    chosen blob (never the test process itself)."""
-    import signal
-
+    """The worker dies by ``_SIGNAL`` (SIGKILL: as the system's out-of-memory killer kills it;
+    SIGSEGV: as a native library's fault does) when given the chosen blob (never the test
+    process itself)."""
     if _CRASH_ON.is_file() and blob == _CRASH_ON.read_text() and os.getpid() != _PARENT[0]:
-        os.kill(os.getpid(), signal.SIGKILL)
+        os.kill(os.getpid(), _SIGNAL[0])
 
 
 def _crashing_task_lod(store_root, blob, *args):
@@ -194,13 +194,17 @@ _crashing_task_lod.__module__, _crashing_task_lod.__qualname__ = "assetpipe.step
 _crashing_task_mesh.__module__, _crashing_task_mesh.__qualname__ = "assetpipe.steps", "task_mesh"
 
 
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGSEGV"])
 @pytest.mark.parametrize("step", ["mesh", "lod"])
-def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, monkeypatch, step):
+def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, monkeypatch, step, sig):
     """Four models' mesh (a phase) or LOD steps (the streamed phase) are in the pool when one
     model's step kills its worker: the others' steps, lost with the pool, are run again alone
     and build; the model whose step kills a worker even alone fails with one line saying so.
-    (Before, every step still in the pool failed with it.)"""
+    (Before, every step still in the pool failed with it.) The line says how the worker died:
+    SIGKILL (the out-of-memory killer's signal) is out of memory, not a bug to report; another
+    signal is a native library's fault, an internal error."""
     import json
+    import signal
 
     from assetpipe.build import run_build
     from assetpipe.options import BuildOptions
@@ -219,8 +223,16 @@ def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, mon
     monkeypatch.setattr(steps, f"task_{step}", {"lod": _crashing_task_lod, "mesh": _crashing_task_mesh}[step])
     monkeypatch.setattr(sys.modules[__name__], "_CRASH_ON", marker)
     monkeypatch.setattr(sys.modules[__name__], "_PARENT", [os.getpid()])
+    monkeypatch.setattr(sys.modules[__name__], "_SIGNAL", [getattr(signal, sig)])
     report = run_build([src], tmp_path / "out", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache")
     status = {Path(r.source).stem: (r.status, r.error) for r in report.results}
-    assert status["bad"][0] == "failed" and "worker process crashed running this step alone" in status["bad"][1], status
+    assert status["bad"][0] == "failed", status
     assert f"step {step}" in status["bad"][1], status
+    if sig == "SIGKILL":
+        assert f"out of memory in step {step} (its worker process was killed (SIGKILL)" in status["bad"][1], status
+        assert "internal error" not in status["bad"][1] and "please report" not in status["bad"][1], status
+    else:
+        assert "worker process crashed running this step alone (SIGSEGV: a native library's fault)" in \
+            status["bad"][1], status
+        assert "internal error" in status["bad"][1], status
     assert all(status[n][0] == "built" for n in ("a", "c", "d")), status
