@@ -250,15 +250,26 @@ STREAM_MAX_QUEUED = 64
 
 def _death_signal(workers: list, timeout: float = 10.0) -> int | None:
     """The signal that killed one of ``workers`` (a broken pool's processes) other than the
-    SIGTERM the pool sends the others when it breaks, or None (none found, or not known)."""
-    import signal
+    SIGTERM the pool sends the others when it breaks, or None (none found, or not known).
 
+    The pool's own thread reaps its processes too: a join here can return before that thread
+    has recorded the exit code (its ``waitpid`` took the status), so each code is read again
+    until it is known (the pool ends every process of a broken pool at once)."""
+    import signal
+    import time
+
+    deadline = time.monotonic() + timeout
     for p in workers:
-        try:
-            p.join(timeout)
-            code = p.exitcode
-        except Exception:  # noqa: BLE001 - only to name the signal
-            continue
+        code = None
+        while True:
+            try:
+                p.join(max(0.0, deadline - time.monotonic()))
+                code = p.exitcode
+            except Exception:  # noqa: BLE001 - only to name the signal
+                break
+            if code is not None or time.monotonic() >= deadline:
+                break
+            time.sleep(0.01)
         if code is not None and code < 0 and -code != signal.SIGTERM:
             return -code
     return None
