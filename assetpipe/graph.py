@@ -282,15 +282,14 @@ def _crash_outcome(sig: int | None, secs: float) -> tuple[str, str, float]:
     if sig == signal.SIGKILL:
         return ("memory", "its worker process was killed (SIGKILL) running this step alone, most likely by "
                           "the system's out-of-memory killer: the step needed more memory than was free", secs)
-    if sig is not None:
+    if sig is None:
+        how = "killed, or a native library's fault"
+    else:
         try:
-            name = signal.Signals(sig).name
+            how = f"{signal.Signals(sig).name}: a native library's fault"
         except ValueError:
-            name = f"signal {sig}"
-        return ("internal", f"a build worker process crashed running this step alone ({name}: a native "
-                            "library's fault)", secs)
-    return ("internal", "a build worker process crashed running this step alone (killed, or a native "
-                        "library's fault)", secs)
+            how = f"signal {sig}: a native library's fault"
+    return ("internal", f"a build worker process crashed running this step alone ({how})", secs)
 
 
 @dataclass
@@ -432,8 +431,8 @@ class Graph:
                 a.seconds += secs
                 if status == "ok":
                     continue
-                if status == "memory":  # (a worker killed by the system's out-of-memory killer: why)
-                    value = f"out of memory in step {label}" + (f" ({value})" if value != "out of memory" else "")
+                if status == "memory":  # value: why, when known (a worker the out-of-memory killer ended)
+                    value = f"out of memory in step {label}" + (f" ({value})" if value else "")
                 if label.startswith("texture"):
                     a.warnings.append(f"{label} skipped: {value if status != 'internal' else 'internal error'}")
                     if status == "internal":

@@ -32,8 +32,8 @@ def call_task(fn, *args) -> tuple[str, object, float]:
         return "ok", fn(*args), time.perf_counter() - t0
     except AssetError as exc:
         return "asset", str(exc), time.perf_counter() - t0
-    except MemoryError:  # the graph names the input and the step
-        return "memory", "out of memory", time.perf_counter() - t0
+    except MemoryError:  # the graph names the input and the step (no more to say here)
+        return "memory", "", time.perf_counter() - t0
     except Exception as exc:  # a bug of ours
         return "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", time.perf_counter() - t0
 

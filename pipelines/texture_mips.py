@@ -502,8 +502,8 @@ def _premultiply_rows(rgba, colour16):
 def _unpremultiply_rows(pre, straight, scale, srgb8):
     """One level of :func:`_premultiplied_chain`, compiled: float32 (n, 4) premultiplied rows and
     uint16 (n, 3) straight colour -> uint8 (n, 4) colour (``srgb8``: (65536,) uint8, the encoding
-    table: sRGB, or linear for a role stored linear) and alpha x ``scale`` (float32; 1: unscaled), each rounded as the numpy
-    expressions it replaced, bit for bit: colour = rint(clip(pre / alpha, 0, 1) x 65535), the
+    table: sRGB, or linear for a role stored linear) and alpha x ``scale`` (float32; 1:
+    unscaled), each rounded as the numpy expressions it replaced, bit for bit: colour = rint(clip(pre / alpha, 0, 1) x 65535), the
     straight colour where alpha <= 0.5 / 65535; alpha rint(clip(alpha x scale, 0, 1) x 255)."""
     n = pre.shape[0]
     out = np.empty((n, 4), np.uint8)

@@ -313,7 +313,6 @@ def test_a_small_png_claiming_a_large_image_is_refused_before_its_pixels_are_all
     assert peak < 8 << 20, peak
 
 
-
 def test_an_8bit_png_whose_stream_does_not_inflate_is_not_called_16bit():
     """A zlib error in the pixel stream (chunk CRCs valid) names the problem without calling an
     8-bit PNG a 16-bit one (the message said "16-bit" for every PNG before)."""
