@@ -67,6 +67,17 @@ def test_the_old_rules_would_have_flagged_the_fixtures(built: Path) -> None:
     png = decode_rgba((built / "out" / nm["path"]).read_bytes())
     lv0 = np.asarray(read_ktx2((built / "out" / nm["ktx2"]).read_bytes()).levels[0])
     assert np.abs(png.astype(int) - lv0).mean() / 255 > 2 / 255
+    # the soft mask: its coverage-keeping chain moves the small levels' premultiplied means (the
+    # old rule, over its tolerance), not their alpha-weighted colour (the rule now, for MASK)
+    from assetpipe.renderer.checks.textures import _linear_premultiplied, _mean_colour, sample
+
+    side = json.loads((built / "out" / "masksoft.asset.json").read_text())
+    ms = side["materials"][0]["textures"]["baseColor"]
+    texels = [sample(np.asarray(lv)) for lv in read_ktx2((built / "out" / ms["ktx2"]).read_bytes()).levels]
+    old = [float(np.abs(_linear_premultiplied(t, True).mean(0) - _linear_premultiplied(texels[0], True).mean(0)).max())
+           for t in texels]
+    new = [float(np.abs(_mean_colour(t, True, True) - _mean_colour(texels[0], True, True)).max()) for t in texels]
+    assert max(old) > OPTS.texture_mean_tolerance > 10 * max(new), (old, new)
 
 
 @pytest.mark.parametrize("kind", list(MUTATIONS))

@@ -9,7 +9,9 @@ a second UV set, vertex colours where the kind needs them) with small textures m
   (256 x 256, one 2 x 2 white spot: its linear mean rounds to black at the small mips);
 * ``specgloss``: KHR_materials_pbrSpecularGlossiness with a diffuse texture and the default
   specularFactor (1, 1, 1), the issue's false alarm;
-* ``mask`` / ``blend``: alpha-tested and blended base colour;
+* ``mask`` / ``blend``: alpha-tested and blended base colour; ``masksoft``: alpha-tested at 0.9
+  over a fine pattern of opaque texels, whose small levels' alpha the coverage-keeping chain
+  scales up;
 * ``transform``: KHR_texture_transform on the base colour;
 * ``vertexcolor``: COLOR_0, no texture;
 * ``multiuv``: base colour on TEXCOORD_1;
@@ -29,7 +31,7 @@ from PIL import Image
 
 from gltf_builder import GltfBuilder
 
-KINDS = ("pbr", "specgloss", "mask", "blend", "transform", "vertexcolor", "multiuv", "normalmap", "orm")
+KINDS = ("pbr", "specgloss", "mask", "masksoft", "blend", "transform", "vertexcolor", "multiuv", "normalmap", "orm")
 
 
 def sphere(seg_u: int = 32, seg_v: int = 16):
@@ -136,6 +138,14 @@ def make_asset(kind: str) -> GltfBuilder:
         alpha = np.where((np.indices((64, 64)).sum(0) // 8) % 2 == 0, 255, 0).astype(np.uint8)
         pbr["baseColorTexture"] = {"index": tex(base_texture(alpha=alpha))}
         mat.update(alphaMode="MASK", alphaCutoff=0.5, doubleSided=True)
+    elif kind == "masksoft":
+        # a fine pattern of opaque texels (20%) over transparent ones, tested at 0.9, as
+        # AlphaBlendModeTest's labels: the small levels' alpha averages to about 0.2 everywhere,
+        # and keeping 20% of texels above the cutoff scales it up about 4.5x, so their
+        # premultiplied means move far from level 0's, which the old rule took for a broken chain
+        dots = np.where(np.random.default_rng(5).random((64, 64)) < 0.2, 255, 0).astype(np.uint8)
+        pbr["baseColorTexture"] = {"index": tex(base_texture(alpha=dots))}
+        mat.update(alphaMode="MASK", alphaCutoff=0.9, doubleSided=True)
     elif kind == "blend":
         pbr["baseColorTexture"] = {"index": tex(base_texture(alpha=np.full((64, 64), 160, np.uint8)))}
         mat.update(alphaMode="BLEND")

@@ -87,6 +87,20 @@ def _linear_premultiplied(texels: np.ndarray, srgb: bool) -> np.ndarray:
     return rgb * (texels[:, 3:4].astype(np.float32) / 255.0)
 
 
+def _mean_colour(texels: np.ndarray, srgb: bool, mask: bool) -> np.ndarray | None:
+    """(3,) the mean a level must keep: the linear premultiplied mean; for an alpha-tested
+    (MASK) texture the alpha-weighted mean of the linear colour (sum of colour x alpha over
+    sum of alpha), None when every alpha is 0. A MASK chain scales each level's alpha to keep
+    level 0's coverage (FORMAT.md), which moves its premultiplied mean by design (up to 0.27 at
+    the 1x1 level of AlphaBlendModeTest's labels with cutoff 0.75); a uniform scale leaves the
+    alpha-weighted colour unchanged (0.021 at most there, clipped alphas included)."""
+    pm = _linear_premultiplied(texels, srgb)
+    if not mask:
+        return pm.mean(axis=0)
+    total = float(texels[:, 3].astype(np.float64).sum()) / 255.0
+    return pm.sum(axis=0) / total if total > 0 else None
+
+
 def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: CheckResult,
                       options: ValidateOptions, cache: dict[str, Any] | None = None,
                       ) -> tuple[list[str], dict[str, Any]]:
@@ -152,7 +166,9 @@ def check_one_texture(root: Path, key: str, role: str, tex: dict[str, Any], r: C
     if role == "normal":
         _normal_checks(key, samples, r, msgs, fig)
     else:
-        means = {i: _linear_premultiplied(s, srgb).mean(axis=0) for i, s in samples.items()}
+        # an alpha-tested texture carries its coverage per level (None for every other one)
+        mask = role == "baseColor" and tex.get("coverage") is not None
+        means = {i: m for i, s in samples.items() if (m := _mean_colour(s, srgb, mask)) is not None}
         if 0 in means:
             m0 = means[0]
             # black levels: only when level 0's mean says the level cannot be black (see BLACK_MEAN_CODES)
@@ -225,14 +241,16 @@ class TexturesCheck(Check):
     measures = ("every material texture: the KTX2 reads; vkFormat, size and level count match the sidecar and "
                 "the role (sRGB for baseColor/emissive, linear otherwise); the full mip chain with the expected "
                 "sizes; no level all black unless level 0's mean rounds to black; each level's linear "
-                "premultiplied mean against level 0's; level 0 against the level-0 image (for normal maps: "
+                "premultiplied mean (alpha-tested: alpha-weighted colour) against level 0's; level 0 against the level-0 image (for normal maps: "
                 "the image's vectors renormalised); normal maps: unit length and mean z")
     tolerance = ("exact for formats, sizes and counts; texture_mean_tolerance 0.12 (linear 0..1) for mean "
                  "drift; texture_png_tolerance 2/255 mean absolute difference for level 0 vs image (block-compressed: "
                  "texture_compressed_png_tolerance 6/255 over the stored channels); "
                  "sqrt(3)/255 for normal length; mean z >= 0.5; black only when level 0's mean < 1.5 codes (5.5 for block formats)")
     reason = ("mips are exact area averages, so every level keeps level 0's mean up to rounding (FORMAT.md: "
-              "meanDrift) except MASK alpha scaling, which raises alpha where coverage thins: the worst measured "
+              "meanDrift); a MASK chain scales alpha per level to keep coverage, so for it the alpha-weighted "
+              "colour is compared (a uniform alpha scale leaves it unchanged; its premultiplied mean moved by up "
+              "to 0.27 at AlphaBlendModeTest's 1x1 level, the alpha-weighted colour by 0.021): the worst measured "
               "drift was 0.037 (the generated MASK kind), 0.12 allows 3x that and still catches a wrong level. Level 0 is the "
               "image's texels re-stored (a JPEG decoded by another decoder differs by at most 1-2 codes). "
               "Renormalised 8-bit vectors are off unit length by at most sqrt(3)/255 (rounding)")
