@@ -3,7 +3,7 @@
 Per model the steps are::
 
     import ──> mesh ──> lod ──┐
-       └────> texture (per image x role, shared between models) ──> encode ──> materialise
+       └────> texture (per image a model uses, all its uses at once; shared) ──> encode ──> materialise
 
 A step's cache key is the digest of: its name and version (:mod:`assetpipe.versions`), its
 options in canonical JSON, the digests of everything it reads (source files, or the blobs of
@@ -41,6 +41,23 @@ from assetpipe.cache.store import Store
 TEXTURE_DIR = "textures"
 
 
+def _use_label(name: str, use: tuple, uses: list) -> str:
+    """The record label of one use (role, alpha mode, cutoff) of an image among all of a model's
+    ``uses`` of it: ``texture NAME (ROLE)``, with the alpha mode (and a mask's cutoff) where
+    another use has the same role, so that materials sampling one image with different alpha
+    modes keep their own textures."""
+    role, alpha, cutoff = use
+    if sum(u[0] == role for u in uses) > 1:
+        role = f"{role} {alpha}" + (f" {cutoff:g}" if alpha == "MASK" else "")
+    return f"texture {name} ({role})"
+
+
+def _uses_label(name: str, uses: list) -> str:
+    """The step label of an image's texture step: its uses' labels joined."""
+    inner = [_use_label(name, u, uses)[len(f"texture {name} ("):-1] for u in uses]
+    return f"texture {name} ({', '.join(inner)})"
+
+
 @dataclass
 class StepRun:
     """What happened to one step of one asset."""
@@ -63,7 +80,8 @@ class AssetState:
     key_inputs: dict = field(default_factory=dict)  # step label -> what its key was made of
     records: dict = field(default_factory=dict)  # step label -> record
     inputs: dict = field(default_factory=dict)  # absolute path -> digest (everything read)
-    texture_jobs: dict = field(default_factory=dict)  # (material, role) -> texture key
+    texture_jobs: dict = field(default_factory=dict)  # (material, role) -> its use's record label
+    texture_uses: dict = field(default_factory=dict)  # texture step label -> its uses' record labels
     outputs: dict = field(default_factory=dict)  # OUT-relative path -> blob digest
     seconds: float = 0.0  # time of the steps run for this asset (a shared step counts for each)
     options: object = None  # BuildOptions for this asset (None: the graph's)
@@ -627,13 +645,19 @@ class Graph:
             return 0.0
 
     def _texture_jobs(self, assets: list[AssetState]) -> tuple[list, list[float]]:
-        """The texture steps of the assets, and an estimate of the CPU seconds of each."""
+        """The texture steps of the assets, and an estimate of the CPU seconds of each: one step
+        per image a model uses, with every use (role, alpha mode, cutoff) its materials make of
+        it, so that the image is read and decoded once (``steps.task_texture_uses``; a single use
+        is ``steps.task_texture``, keyed as before). Each use gets its own record label
+        (``texture NAME (ROLE[ ALPHA[ CUTOFF]])``), filled in by :meth:`_after_textures`."""
         jobs, costs = [], []
         for a in assets:
             imp = a.records["import"]
             images = imp["meta"]["images"]
             base = a.source.parent
             tex_opts = self._tex_opts(a)
+            groups: dict[str, tuple[dict, int, list]] = {}  # image digest -> (image, bytes, uses)
+            used_as: dict = {}  # (material, role) -> (image digest, use)
             for mi, mat in enumerate(imp["meta"]["materials"]):
                 for role, tex in mat["textures"].items():
                     image = dict(images[tex["image"]])
@@ -652,16 +676,44 @@ class Graph:
                             pass
                     alpha = mat["alphaMode"] if role == "baseColor" else "OPAQUE"
                     cutoff = mat["alphaCutoff"] if alpha == "MASK" else 0.5
-                    tin = {"image": image["digest"], "role": role, "alphaMode": alpha, "alphaCutoff": cutoff}
-                    kin = self._key_inputs("texture", tin, tex_opts)
-                    label = f"texture {image['name']} ({role})"
-                    a.texture_jobs[(mi, role)] = label
-                    jobs.append(([a], label, kin, (steps.task_texture, str(self.store.root), image, str(base),
-                                                   role, alpha, cutoff, tex_opts)))
-                    costs.append(TEXTURE_SECONDS_PER_BYTE * size)
+                    use = (role, alpha, cutoff)
+                    image, size, uses = groups.setdefault(image["digest"], (image, size, []))
+                    if use not in uses:
+                        uses.append(use)
+                    used_as[(mi, role)] = (image["digest"], use)
+            for key, (digest, use) in used_as.items():
+                image, _, uses = groups[digest]
+                a.texture_jobs[key] = _use_label(image["name"], use, uses)
+            for digest, (image, size, uses) in groups.items():
+                if len(uses) == 1:
+                    role, alpha, cutoff = uses[0]
+                    tin = {"image": digest, "role": role, "alphaMode": alpha, "alphaCutoff": cutoff}
+                    call = (steps.task_texture, str(self.store.root), image, str(base), role, alpha, cutoff, tex_opts)
+                else:
+                    tin = {"image": digest, "uses": [list(u) for u in uses]}
+                    call = (steps.task_texture_uses, str(self.store.root), image, str(base),
+                            [list(u) for u in uses], tex_opts)
+                label = _uses_label(image["name"], uses)
+                a.texture_uses[label] = [_use_label(image["name"], u, uses) for u in uses]
+                jobs.append(([a], label, self._key_inputs("texture", tin, tex_opts), call))
+                # decoded once; each further use filters the image again
+                costs.append(TEXTURE_SECONDS_PER_BYTE * size * (1.0 + 0.5 * (len(uses) - 1)))
         return jobs, costs
 
+    @staticmethod
+    def _use_records(a: AssetState) -> None:
+        """Each texture use's record (``steps.task_texture``'s form) under its own label, out of
+        its image's step record (the same record for a single use); none where that step failed."""
+        for label, use_labels in a.texture_uses.items():
+            rec = a.records.get(label)
+            if len(use_labels) == 1:
+                continue  # the step's own label and record
+            for i, ul in enumerate(use_labels):
+                a.records[ul] = None if rec is None else steps.texture_use_record(rec, i)
+
     def _after_textures(self, assets: list[AssetState]) -> None:
+        for a in assets:
+            self._use_records(a)
         for a in assets:  # textures over the build's max_size (a scene's own caps are reported below)
             if a.plan is None and not a.failed:
                 for label in dict.fromkeys(a.texture_jobs.values()):

@@ -358,15 +358,13 @@ def texture_key_libs(libs: dict, tex_opts: dict | None) -> dict:
     return {**libs, "etcpak-build": etcpak_variant()}
 
 
-def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_mode: str,
-                 alpha_cutoff: float, texture_options: dict) -> dict:
+def _read_image(store, image: dict, model_dir: str):
+    """The ImageSource of a texture step's ``image`` (read from the model's folder, or the
+    store for an embedded one)."""
     from assetpipe.core.errors import MissingFileError
     from assetpipe.core.hashing import digest_bytes
     from assetpipe.pipelines.model import ImageSource
-    from assetpipe.pipelines.texture_options import TextureOptions
-    from assetpipe.pipelines.texture_process import process_texture
 
-    store = Store(Path(store_root))
     if image["path"] is not None:
         path = Path(model_dir) / image["path"]
         try:
@@ -377,9 +375,11 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
         data = store.get_blob(image["digest"])
         if data is None:
             raise FileNotFoundError(image["digest"])
-    src = ImageSource(name=image["name"], data=data, mime=image["mime"], origin=image["path"] or image["name"],
-                      digest=digest_bytes(data))
-    pt = process_texture(src, role, alpha_mode, alpha_cutoff, options_from_json(TextureOptions, texture_options))
+    return ImageSource(name=image["name"], data=data, mime=image["mime"], origin=image["path"] or image["name"],
+                       digest=digest_bytes(data))
+
+
+def _texture_result(store, src, pt) -> dict:
     blobs = {"ktx2": store.put_blob(pt.ktx2), "level0": store.put_blob(pt.level0)}
     meta = {"width": pt.width, "height": pt.height, "levels": pt.levels, "vkFormat": pt.vk_format,
             "colorSpace": pt.color_space, "level0Ext": pt.level0_ext, "level0Shared": pt.level0_shared,
@@ -389,6 +389,42 @@ def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_
     if pt.warnings:  # levels dropped for max_size (#13)
         meta["warnings"] = list(pt.warnings)
     return {"blobs": blobs, "meta": meta}
+
+
+def task_texture(store_root: str, image: dict, model_dir: str, role: str, alpha_mode: str,
+                 alpha_cutoff: float, texture_options: dict) -> dict:
+    """One use of an image: ``{"blobs": {"ktx2", "level0"}, "meta": {...}}``."""
+    from assetpipe.pipelines.texture_options import TextureOptions
+    from assetpipe.pipelines.texture_process import process_texture
+
+    store = Store(Path(store_root))
+    src = _read_image(store, image, model_dir)
+    pt = process_texture(src, role, alpha_mode, alpha_cutoff, options_from_json(TextureOptions, texture_options))
+    return _texture_result(store, src, pt)
+
+
+def task_texture_uses(store_root: str, image: dict, model_dir: str, uses: list, texture_options: dict) -> dict:
+    """Every use ``(role, alphaMode, alphaCutoff)`` a model makes of one image, the image read
+    and decoded once (:func:`pipelines.texture_process.process_texture_uses`): ``{"blobs":
+    {"ktx2.I", "level0.I"}, "meta": {"uses": [meta of use I, ...]}}``, each use's blobs and meta
+    as :func:`task_texture` gives them (:func:`texture_use_record` takes one out)."""
+    from assetpipe.pipelines.texture_options import TextureOptions
+    from assetpipe.pipelines.texture_process import process_texture_uses
+
+    store = Store(Path(store_root))
+    src = _read_image(store, image, model_dir)
+    results = process_texture_uses(src, [tuple(u) for u in uses], options_from_json(TextureOptions, texture_options))
+    blobs, metas = {}, []
+    for i, pt in enumerate(results):
+        one = _texture_result(store, src, pt)
+        blobs.update({f"{k}.{i}": v for k, v in one["blobs"].items()})
+        metas.append(one["meta"])
+    return {"blobs": blobs, "meta": {"uses": metas}}
+
+
+def texture_use_record(record: dict, i: int) -> dict:
+    """Use ``i``'s record (as :func:`task_texture` makes it) out of a :func:`task_texture_uses` one."""
+    return {"blobs": {k: record["blobs"][f"{k}.{i}"] for k in ("ktx2", "level0")}, "meta": record["meta"]["uses"][i]}
 
 
 # -- encode ---------------------------------------------------------------------------------

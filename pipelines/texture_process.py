@@ -13,6 +13,7 @@ PNG/JPEG for ``texturePath`` is unchanged.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -91,6 +92,16 @@ def encode_png(rgba: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
+#: roles filtered alike (every channel linear, alpha too): one chain serves them all, the same
+#: KTX2 bytes (an ORM image used for occlusion and for metallicRoughness is filtered once). Of
+#: the alpha modes only MASK (with its cutoff) changes a chain: OPAQUE and BLEND filter alike
+#: (:func:`pipelines.texture_mips.build_mip_chain`).
+_LINEAR_ROLES = ("metallicRoughness", "occlusion")
+
+#: one use of an image: (role, alphaMode, alphaCutoff)
+TextureUse = tuple[str, str, float]
+
+
 def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", alpha_cutoff: float = 0.5,
                     options: TextureOptions = DEFAULT_TEXTURE_OPTIONS) -> ProcessedTexture:
     """Decode ``image``, build its mip chain for ``role`` and encode KTX2 + level 0.
@@ -99,6 +110,15 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
     ``options.oversize == "refuse"``, for an image larger than ``options.max_size`` (read from
     its header, before decoding).
     """
+    return process_texture_uses(image, [(role, alpha_mode, alpha_cutoff)], options)[0]
+
+
+def process_texture_uses(image: ImageSource, uses: Sequence[TextureUse],
+                         options: TextureOptions = DEFAULT_TEXTURE_OPTIONS) -> list[ProcessedTexture]:
+    """:func:`process_texture` for every use of one image (a model's materials may sample it as
+    several roles, or as baseColor with several alpha modes): the image is decoded once, and
+    uses filtered alike (:data:`_LINEAR_ROLES`; OPAQUE and BLEND) share one chain. Element ``i``
+    of the result is exactly ``process_texture(image, *uses[i], options)``."""
     if options.oversize == "refuse" and options.max_size is not None:
         size = image_size(image)
         if size is not None and max(size) > options.max_size:
@@ -107,8 +127,21 @@ def process_texture(image: ImageSource, role: str, alpha_mode: str = "OPAQUE", a
                 f"image {image.name!r} is {size[0]}x{size[1]}: larger than the maximum texture size {options.max_size} "
                 "(refused: oversize textures are set to refuse; --max-texture-size raises the limit)")
     rgba = decode_image(image, max_pixels=options.max_pixels)
-    source_h, source_w = rgba.shape[:2]
     alpha_below = has_alpha_below_255(rgba)
+    done: dict[tuple, ProcessedTexture] = {}
+    out = []
+    for role, alpha_mode, alpha_cutoff in uses:
+        same = ("linear",) if role in _LINEAR_ROLES else (role, float(alpha_cutoff) if alpha_mode == "MASK" else None)
+        if same not in done:
+            done[same] = _process_decoded(image, rgba, alpha_below, role, alpha_mode, alpha_cutoff, options)
+        out.append(done[same])
+    return out
+
+
+def _process_decoded(image: ImageSource, rgba: np.ndarray, alpha_below: bool, role: str, alpha_mode: str,
+                     alpha_cutoff: float, options: TextureOptions) -> ProcessedTexture:
+    """One use of a decoded image (``rgba`` as :func:`decode_image` returns it; not modified)."""
+    source_h, source_w = rgba.shape[:2]
     chain = build_mip_chain(rgba, role, alpha_mode, alpha_cutoff, options)
     scheme = SUPERCOMPRESSION_ZSTD if options.supercompression == "zstd" else SUPERCOMPRESSION_NONE
     try:

@@ -236,3 +236,64 @@ def test_a_worker_killed_by_one_models_step_fails_that_model_alone(tmp_path, mon
             status["bad"][1], status
         assert "internal error" in status["bad"][1], status
     assert all(status[n][0] == "built" for n in ("a", "c", "d")), status
+
+
+def test_one_texture_step_per_image_and_each_alpha_mode_keeps_its_own_texture(tmp_path, monkeypatch):
+    # one image sampled as baseColor by an opaque material and by two alpha-tested ones with
+    # other cutoffs, another as occlusion and metallicRoughness (an ORM image): one texture
+    # step per image (read and decoded once), and every material its own use's texture. Before,
+    # the three baseColor uses shared one record label, so every one of them was given the
+    # last one's texture: the alpha-tested materials lost their coverage-preserving mips.
+    import io
+    import json
+
+    from PIL import Image
+
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+    from gltf_builder import GltfBuilder
+
+    rng = np.random.default_rng(3)
+    labels = rng.integers(0, 256, (32, 32, 4), dtype=np.uint8)
+    labels[::2, :, 3] = 255
+    orm = rng.integers(0, 256, (16, 16, 3), dtype=np.uint8)
+    src = tmp_path / "src"
+    src.mkdir()
+    for name, arr in (("labels.png", labels), ("orm.png", orm)):
+        buf = io.BytesIO()
+        Image.fromarray(arr).save(buf, "PNG")
+        (src / name).write_bytes(buf.getvalue())
+    b = GltfBuilder()
+    t_labels, t_orm = b.add_texture(uri="labels.png"), b.add_texture(uri="orm.png")
+    mats = [b.add_material(name="opaque", pbrMetallicRoughness={"baseColorTexture": {"index": t_labels}}),
+            b.add_material(name="cut25", alphaMode="MASK", alphaCutoff=0.25,
+                           pbrMetallicRoughness={"baseColorTexture": {"index": t_labels}}),
+            b.add_material(name="cut75", alphaMode="MASK", alphaCutoff=0.75,
+                           pbrMetallicRoughness={"baseColorTexture": {"index": t_labels}}),
+            b.add_material(name="orm", occlusionTexture={"index": t_orm},
+                           pbrMetallicRoughness={"metallicRoughnessTexture": {"index": t_orm}})]
+    for k, m in enumerate(mats):
+        quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32) + [2.0 * k, 0, 0]
+        b.add_node(mesh=b.add_triangles(quad, [0, 1, 2, 0, 2, 3], material=m,
+                                        TEXCOORD_0=[[0, 0], [1, 0], [1, 1], [0, 1]]))
+    b.write_gltf(src / "mats.gltf")
+    _Recording.calls = []
+    monkeypatch.setattr(graph, "Executor", _Recording)
+    run_build([src], tmp_path / "out", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache")
+    textures = [c for c in _Recording.calls if c[0] in (steps.task_texture, steps.task_texture_uses)]
+    assert sorted(c[0].__name__ for c in textures) == ["task_texture_uses"] * 2
+    sidecar = json.loads((tmp_path / "out" / "mats.asset.json").read_text())
+    got = {m["name"]: m["textures"] for m in sidecar["materials"]}
+    base = {n: got[n]["baseColor"] for n in ("opaque", "cut25", "cut75")}
+    assert len({t["ktx2"] for t in base.values()}) == 3  # each alpha mode and cutoff its own chain
+    assert base["opaque"]["coverage"] is None
+    for name, cutoff in (("cut25", 0.25), ("cut75", 0.75)):
+        cov = base[name]["coverage"]
+        # the mask's coverage kept at every level: level 0's share of texels at or above the cutoff
+        a0 = labels[..., 3] / 255.0
+        assert len(cov) == base[name]["levels"] and abs(cov[0] - float((a0 >= cutoff).mean())) < 1e-9
+    assert got["orm"]["occlusion"]["ktx2"] == got["orm"]["metallicRoughness"]["ktx2"]
+    # built again into a fresh folder and cache with the executor the build uses: the same bytes
+    monkeypatch.undo()
+    run_build([src], tmp_path / "out2", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache2")
+    assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")

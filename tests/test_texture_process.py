@@ -20,7 +20,8 @@ from assetpipe.pipelines.image_source import sniff_mime
 from assetpipe.pipelines.model import (ROLE_BASE_COLOR, ROLE_EMISSIVE, ROLE_METALLIC_ROUGHNESS, ROLE_NORMAL,
                              ROLE_OCCLUSION, ImageSource)
 from assetpipe.pipelines.texture_mips import TextureOptions, mip_level_count
-from assetpipe.pipelines.texture_process import ProcessedTexture, process_texture
+from assetpipe.pipelines import texture_process
+from assetpipe.pipelines.texture_process import ProcessedTexture, process_texture, process_texture_uses
 
 
 def source(data: bytes, name: str = "t.png", mime: str | None = None) -> ImageSource:
@@ -54,6 +55,34 @@ def test_png_source_kept_as_is():
     assert res.level0 is data and res.level0_ext == ".png" and res.level0_shared
     assert res.has_alpha_below_255 and res.alpha_weighted
     assert (read_ktx2(res.ktx2).levels[0] == rgba).all()
+
+
+def test_every_use_of_an_image_from_one_decode_is_each_use_alone(monkeypatch):
+    # a model's materials sample one image as several roles and alpha modes: decoded once, and
+    # each result is exactly what the use alone gives (occlusion and metallicRoughness, filtered
+    # alike, share one chain); alpha below 255 in places, so the baseColor uses differ
+    rng = np.random.default_rng(7)
+    rgba = rng.integers(0, 256, (48, 40, 4), dtype=np.uint8)
+    rgba[:20, :, 3] = 255
+    image = source(encoded(rgba, "PNG"))
+    uses = [(ROLE_BASE_COLOR, "OPAQUE", 0.5), (ROLE_BASE_COLOR, "MASK", 0.25), (ROLE_BASE_COLOR, "MASK", 0.75),
+            (ROLE_OCCLUSION, "OPAQUE", 0.5), (ROLE_METALLIC_ROUGHNESS, "OPAQUE", 0.5), (ROLE_NORMAL, "OPAQUE", 0.5),
+            (ROLE_BASE_COLOR, "BLEND", 0.5)]
+    alone = [process_texture(image, *u) for u in uses]
+    decodes = []
+    real = texture_process.decode_image
+    monkeypatch.setattr(texture_process, "decode_image", lambda *a, **k: decodes.append(1) or real(*a, **k))
+    together = process_texture_uses(image, uses)
+    assert len(decodes) == 1 and len(together) == len(uses)
+    for one, both in zip(alone, together):
+        assert one.ktx2 == both.ktx2 and one.level0 == both.level0
+        assert (one.coverage, one.mean_drift, one.vk_format, one.alpha_weighted) == \
+            (both.coverage, both.mean_drift, both.vk_format, both.alpha_weighted)
+    assert together[3] is together[4]  # occlusion and metallicRoughness: one chain
+    assert together[0] is together[6]  # OPAQUE and BLEND too (only a mask changes the chain)
+    # the two cutoffs keep their own coverage, so their chains differ
+    assert together[1].coverage != together[2].coverage and together[1].ktx2 != together[2].ktx2
+    assert together[0].coverage is None
 
 
 def test_jpeg_source_kept_and_roles():
