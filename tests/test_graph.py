@@ -297,3 +297,39 @@ def test_one_texture_step_per_image_and_each_alpha_mode_keeps_its_own_texture(tm
     monkeypatch.undo()
     run_build([src], tmp_path / "out2", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache2")
     assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
+
+
+def test_a_broken_image_with_several_uses_is_one_warning_and_the_model_builds(tmp_path):
+    # an ORM image that cannot be decoded, named by occlusion and metallicRoughness: its one
+    # texture step fails with one line naming the image and both uses; the model builds with
+    # its other texture, and its materials simply lack the broken one
+    import io
+    import json
+
+    from PIL import Image
+
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+    from gltf_builder import GltfBuilder
+
+    src = tmp_path / "src"
+    src.mkdir()
+    buf = io.BytesIO()
+    Image.fromarray(np.full((8, 8, 3), 128, np.uint8)).save(buf, "PNG")
+    (src / "base.png").write_bytes(buf.getvalue())
+    (src / "orm.png").write_bytes(buf.getvalue()[:60])  # the header, then nothing
+    b = GltfBuilder()
+    t_base, t_orm = b.add_texture(uri="base.png"), b.add_texture(uri="orm.png")
+    m = b.add_material(name="m", occlusionTexture={"index": t_orm},
+                       pbrMetallicRoughness={"baseColorTexture": {"index": t_base},
+                                             "metallicRoughnessTexture": {"index": t_orm}})
+    b.add_node(mesh=b.add_triangles([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [0, 1, 2], material=m,
+                                    TEXCOORD_0=[[0, 0], [1, 0], [0, 1]]))
+    b.write_gltf(src / "orm.gltf")
+    report = run_build([src], tmp_path / "out", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache")
+    (res,) = report.results
+    assert res.status == "built", res.error
+    said = [w for w in res.warnings if "orm.png" in w]
+    assert len(said) == 1 and "(metallicRoughness, occlusion) skipped" in said[0] and "truncated PNG" in said[0], said
+    side = json.loads((tmp_path / "out" / "orm.asset.json").read_text())
+    assert set(side["materials"][0]["textures"]) == {"baseColor"}
