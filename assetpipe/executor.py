@@ -108,7 +108,7 @@ def input_blobs(fn, args: list) -> list[str]:
         return [args[1] if fn is steps.task_encode else args[0]]
     if fn is steps.task_lod_handmade:
         return list(args[0])
-    if fn is steps.task_texture:
+    if fn in (steps.task_texture, steps.task_texture_uses):
         return [args[0]["digest"]] if args[0].get("path") is None else []
     return blob_digests(args)
 
@@ -117,7 +117,7 @@ def machine_libs(fn, args: list) -> dict:
     """The parts of a task's key that depend on the machine's build of a library rather than its
     version (``{}`` for most tasks): for an ETC2 texture step ``{"etcpak-build": NAME}``, made
     by the same function as the key (``steps.texture_key_libs``), so they cannot disagree."""
-    if fn is steps.task_texture:
+    if fn in (steps.task_texture, steps.task_texture_uses):
         return steps.texture_key_libs({}, args[-1])
     return {}
 
@@ -149,7 +149,7 @@ def _absolute(fn, args: list) -> list:
     args = list(args)
     if fn is steps.task_import:
         args[0] = os.path.abspath(args[0])
-    elif fn is steps.task_texture:
+    elif fn in (steps.task_texture, steps.task_texture_uses):
         args[1] = os.path.abspath(args[1])
     return args
 

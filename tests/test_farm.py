@@ -289,3 +289,93 @@ def test_etc2_refused_when_a_worker_cannot_run_the_keys_build(mixed_cluster, etc
         ex.close()
     assert not report.failed, [r.error for r in report.results]
     assert tree(tmp_path / "farm") == ref
+
+
+def test_an_image_with_several_uses_builds_on_the_farm_as_locally(cluster, tmp_path):
+    # one texture step per image a model uses (steps.task_texture_uses): an ORM file named by
+    # two roles, and an embedded label sheet sampled opaque and alpha-tested (its bytes travel
+    # with the task, as a single use's do); the farm's outputs are the local build's
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from gltf_builder import GltfBuilder
+
+    src = tmp_path / "src"
+    src.mkdir()
+    rng = np.random.default_rng(11)
+
+    def png(arr) -> bytes:
+        buf = io.BytesIO()
+        Image.fromarray(arr).save(buf, "PNG")
+        return buf.getvalue()
+
+    (src / "orm.png").write_bytes(png(rng.integers(0, 256, (16, 16, 3), dtype=np.uint8)))
+    labels = rng.integers(0, 256, (16, 16, 4), dtype=np.uint8)
+    for name, embed in (("orm", False), ("labels", True)):
+        b = GltfBuilder()
+        if embed:
+            t = b.add_texture(data=png(labels))
+            mats = [b.add_material(name="o", pbrMetallicRoughness={"baseColorTexture": {"index": t}}),
+                    b.add_material(name="m", alphaMode="MASK", alphaCutoff=0.6,
+                                   pbrMetallicRoughness={"baseColorTexture": {"index": t}})]
+        else:
+            t = b.add_texture(uri="orm.png")
+            mats = [b.add_material(name="orm", occlusionTexture={"index": t},
+                                   pbrMetallicRoughness={"metallicRoughnessTexture": {"index": t}})]
+        for k, m in enumerate(mats):
+            tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32) + [2.0 * k, 0, 0]
+            b.add_node(mesh=b.add_triangles(tri, [0, 1, 2], material=m, TEXCOORD_0=[[0, 0], [1, 0], [0, 1]]))
+        if embed:
+            b.write_glb(src / f"{name}.glb")
+        else:
+            b.write_gltf(src / f"{name}.gltf")
+    local = run_build([src], tmp_path / "local-out", DEFAULT_BUILD_OPTIONS, cache_dir=Store(tmp_path / "local"))
+    assert not local.failed
+    report, ex, _ = _farm_build(src, tmp_path, "farm", cluster.scheduler_address)
+    assert ex.per_step["task_texture_uses"]["tasks"] == 2
+    # what was sent with them: the embedded image's bytes alone (the ORM file is read by path)
+    assert ex.per_step["task_texture_uses"]["to_workers"] == len(png(labels))
+    assert tree(tmp_path / "farm-out") == tree(tmp_path / "local-out")
+
+
+def test_etc2_image_with_several_uses_is_encoded_on_workers_with_the_build_the_key_names(cluster, tmp_path,
+                                                                                        monkeypatch):
+    # an ORM image named by two roles goes to a worker as one step (steps.task_texture_uses): it
+    # must carry the etcpak build its key names as a single use's step does, or the worker's
+    # better build writes other blocks under the client's key
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from assetpipe.pipelines.texture_compress import ETCPAK_BUILD_ENV, etcpak_builds
+    from gltf_builder import GltfBuilder
+
+    assert len(etcpak_builds()) >= 2, "needs a CPU with an etcpak SIMD build (every x86-64 with SSE4.1)"
+    src = tmp_path / "src"
+    src.mkdir()
+    buf = io.BytesIO()
+    Image.fromarray(np.random.default_rng(13).integers(0, 256, (64, 64, 3), dtype=np.uint8)).save(buf, "PNG")
+    (src / "orm.png").write_bytes(buf.getvalue())
+    b = GltfBuilder()
+    t = b.add_texture(uri="orm.png")
+    m = b.add_material(name="orm", occlusionTexture={"index": t},
+                       pbrMetallicRoughness={"metallicRoughnessTexture": {"index": t}})
+    b.add_node(mesh=b.add_triangles([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [0, 1, 2], material=m,
+                                    TEXCOORD_0=[[0, 0], [1, 0], [0, 1]]))
+    b.write_gltf(src / "orm.gltf")
+    own = _local(src, tmp_path, "local-best")
+    monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
+    ref = _local(src, tmp_path, "local-none")
+    assert {p for p in ref if p.endswith(".ktx2")} != {p for p in own if p.endswith(".ktx2")}
+    ex = DaskExecutor(cluster.scheduler_address)
+    try:
+        report = run_build([src], tmp_path / "farm", _etc2_options(), cache_dir=Store(tmp_path / "farm-cache"),
+                           scheduler=ex)
+    finally:
+        ex.close()
+    assert not report.failed, [r.error for r in report.results]
+    assert ex.per_step["task_texture_uses"]["tasks"] == 1
+    assert tree(tmp_path / "farm") == ref
