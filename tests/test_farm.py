@@ -187,6 +187,17 @@ def _local(models, tmp: Path, name: str):
     return tree(tmp / name)
 
 
+def _etc2_farm(models, out: Path, cache: Path, address: str) -> DaskExecutor:
+    """An ETC2 build of ``models`` on the cluster at ``address`` into ``out``; its executor."""
+    ex = DaskExecutor(address)
+    try:
+        report = run_build([models], out, _etc2_options(), cache_dir=Store(cache), scheduler=ex)
+    finally:
+        ex.close()
+    assert not report.failed, [r.error for r in report.results]
+    return ex
+
+
 def test_etc2_on_workers_is_encoded_with_the_build_the_key_names(cluster, etc2_models, tmp_path, monkeypatch):
     """The client keys ETC2 steps by its etcpak build (here capped to the portable one by
     ASSETPIPE_ETCPAK_BUILD); the workers' CPUs run a better build, yet they encode with the one
@@ -199,13 +210,7 @@ def test_etc2_on_workers_is_encoded_with_the_build_the_key_names(cluster, etc2_m
     ref = _local(etc2_models, tmp_path, "local-none")
     ktx = {p for p in ref if p.endswith(".ktx2")}  # named by content
     assert ktx and ktx != {p for p in own if p.endswith(".ktx2")}, "the two builds' blocks differ on noise"
-    store = Store(tmp_path / "farm-cache")
-    ex = DaskExecutor(cluster.scheduler_address)
-    try:
-        report = run_build([etc2_models], tmp_path / "farm", _etc2_options(), cache_dir=store, scheduler=ex)
-    finally:
-        ex.close()
-    assert not report.failed, [r.error for r in report.results]
+    ex = _etc2_farm(etc2_models, tmp_path / "farm", tmp_path / "farm-cache", cluster.scheduler_address)
     assert ex.per_step["task_texture"]["tasks"] == 1
     assert ex.worker_builds and all(v[0] != "none" for v in ex.worker_builds.values())  # better CPUs
     assert tree(tmp_path / "farm") == ref
@@ -281,13 +286,7 @@ def test_etc2_refused_when_a_worker_cannot_run_the_keys_build(mixed_cluster, etc
     # the way out the message names: key by the portable build on the client
     monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
     ref = _local(etc2_models, tmp_path, "local-none")
-    ex = DaskExecutor(cluster.scheduler_address)
-    try:
-        report = run_build([etc2_models], tmp_path / "farm", _etc2_options(), cache_dir=Store(tmp_path / "fc"),
-                           scheduler=ex)
-    finally:
-        ex.close()
-    assert not report.failed, [r.error for r in report.results]
+    _etc2_farm(etc2_models, tmp_path / "farm", tmp_path / "fc", cluster.scheduler_address)
     assert tree(tmp_path / "farm") == ref
 
 
@@ -370,12 +369,6 @@ def test_etc2_image_with_several_uses_is_encoded_on_workers_with_the_build_the_k
     monkeypatch.setenv(ETCPAK_BUILD_ENV, "none")
     ref = _local(src, tmp_path, "local-none")
     assert {p for p in ref if p.endswith(".ktx2")} != {p for p in own if p.endswith(".ktx2")}
-    ex = DaskExecutor(cluster.scheduler_address)
-    try:
-        report = run_build([src], tmp_path / "farm", _etc2_options(), cache_dir=Store(tmp_path / "farm-cache"),
-                           scheduler=ex)
-    finally:
-        ex.close()
-    assert not report.failed, [r.error for r in report.results]
+    ex = _etc2_farm(src, tmp_path / "farm", tmp_path / "farm-cache", cluster.scheduler_address)
     assert ex.per_step["task_texture_uses"]["tasks"] == 1
     assert tree(tmp_path / "farm") == ref
