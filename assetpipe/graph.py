@@ -3,7 +3,7 @@
 Per model the steps are::
 
     import ──> mesh ──> lod ──┐
-       └────> texture (per image a model uses, all its uses at once; shared) ──> encode ──> materialise
+       └────> texture (per image a model uses, all its uses in one) ──> encode ──> materialise
 
 A step's cache key is the digest of: its name and version (:mod:`assetpipe.versions`), its
 options in canonical JSON, the digests of everything it reads (source files, or the blobs of
@@ -41,21 +41,25 @@ from assetpipe.cache.store import Store
 TEXTURE_DIR = "textures"
 
 
-def _use_label(name: str, use: tuple, uses: list) -> str:
-    """The record label of one use (role, alpha mode, cutoff) of an image among all of a model's
-    ``uses`` of it: ``texture NAME (ROLE)``, with the alpha mode (and a mask's cutoff) where
-    another use has the same role, so that materials sampling one image with different alpha
-    modes keep their own textures."""
+def _use_what(use: tuple, uses: list) -> str:
+    """What a label says of one use (role, alpha mode, cutoff) of an image among all of a
+    model's ``uses`` of it: its role, with the alpha mode (and a mask's cutoff) where another
+    use has the same role, so that materials sampling one image with different alpha modes keep
+    their own textures."""
     role, alpha, cutoff = use
     if sum(u[0] == role for u in uses) > 1:
-        role = f"{role} {alpha}" + (f" {cutoff:g}" if alpha == "MASK" else "")
-    return f"texture {name} ({role})"
+        return f"{role} {alpha}" + (f" {cutoff:g}" if alpha == "MASK" else "")
+    return role
+
+
+def _use_label(name: str, use: tuple, uses: list) -> str:
+    """The record label of one use of an image: ``texture NAME (WHAT)``."""
+    return f"texture {name} ({_use_what(use, uses)})"
 
 
 def _uses_label(name: str, uses: list) -> str:
-    """The step label of an image's texture step: its uses' labels joined."""
-    inner = [_use_label(name, u, uses)[len(f"texture {name} ("):-1] for u in uses]
-    return f"texture {name} ({', '.join(inner)})"
+    """The step label of an image's texture step: its uses joined."""
+    return f"texture {name} ({', '.join(_use_what(u, uses) for u in uses)})"
 
 
 @dataclass
@@ -696,7 +700,8 @@ class Graph:
                 label = _uses_label(image["name"], uses)
                 a.texture_uses[label] = [_use_label(image["name"], u, uses) for u in uses]
                 jobs.append(([a], label, self._key_inputs("texture", tin, tex_opts), call))
-                # decoded once; each further use filters the image again
+                # only to order the tasks: decoded once, and each further use filters the image
+                # again (a guess, not measured: half a use's cost)
                 costs.append(TEXTURE_SECONDS_PER_BYTE * size * (1.0 + 0.5 * (len(uses) - 1)))
         return jobs, costs
 

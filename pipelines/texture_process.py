@@ -22,7 +22,7 @@ import numpy as np
 from assetpipe.core.errors import InvalidTextureError
 from assetpipe.core.ktx2 import (SUPERCOMPRESSION_NONE, SUPERCOMPRESSION_ZSTD, VK_FORMAT_R8G8B8A8_SRGB,
                                  VK_FORMAT_R8G8B8A8_UNORM, write_ktx2)
-from assetpipe.pipelines.model import ImageSource
+from assetpipe.pipelines.model import ROLE_METALLIC_ROUGHNESS, ROLE_OCCLUSION, ImageSource
 from assetpipe.pipelines.texture_decode import decode_image, has_alpha_below_255, image_size
 from assetpipe.pipelines.texture_mips import build_mip_chain
 from assetpipe.pipelines.texture_options import DEFAULT_TEXTURE_OPTIONS, TextureOptions
@@ -96,7 +96,7 @@ def encode_png(rgba: np.ndarray) -> bytes:
 #: KTX2 bytes (an ORM image used for occlusion and for metallicRoughness is filtered once). Of
 #: the alpha modes only MASK (with its cutoff) changes a chain: OPAQUE and BLEND filter alike
 #: (:func:`pipelines.texture_mips.build_mip_chain`).
-_LINEAR_ROLES = ("metallicRoughness", "occlusion")
+_LINEAR_ROLES = (ROLE_METALLIC_ROUGHNESS, ROLE_OCCLUSION)
 
 #: one use of an image: (role, alphaMode, alphaCutoff)
 TextureUse = tuple[str, str, float]
