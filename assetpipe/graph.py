@@ -140,6 +140,7 @@ class Executor:
     def __init__(self, jobs: int):
         self.jobs = max(1, int(jobs))
         self.pool = None
+        self._spare = None  # the pool's count of cores no task needs (_new_pool)
         self._warming = None
         from assetpipe.worker_life import keep_freed_memory
 
@@ -193,7 +194,10 @@ class Executor:
             f = Future()
             f.set_result(steps.call_task(*call))
             return f
+        spare = self._spare
+        spare.task_started()
         f = self.pool.submit(steps.call_task, *call)
+        f.add_done_callback(spare.task_ended)
         f.assetpipe_pool = self.pool
         return f
 
@@ -232,12 +236,20 @@ class Executor:
         return list(procs.values()) if isinstance(procs, dict) else []
 
     def _new_pool(self):
-        """A process pool whose workers die with this process (assetpipe/worker_life.py)."""
+        """A process pool whose workers die with this process (assetpipe/worker_life.py) and
+        count the cores no task needs (:class:`assetpipe.core.cores.SpareCores`: a task handed
+        to the pool takes one until it ends; an LOD step's helper threads use only the rest). A
+        new count with each pool: the cores a crashed pool's tasks held are not missed."""
+        import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
+        from assetpipe.core.cores import SpareCores
         from assetpipe.worker_life import init_worker
 
-        return ProcessPoolExecutor(self.jobs, initializer=init_worker, initargs=(os.getpid(),))
+        ctx = multiprocessing.get_context()
+        self._spare = SpareCores(ctx, self.jobs)
+        return ProcessPoolExecutor(self.jobs, mp_context=ctx, initializer=init_worker,
+                                   initargs=(os.getpid(), self._spare.value))
 
     def _restart(self):
         try:

@@ -35,8 +35,12 @@ def usable_cpus() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def init_worker(parent_pid: int) -> None:
-    """Pool initializer: tie this worker's life to ``parent_pid`` (the build process)."""
+def init_worker(parent_pid: int, spare=None) -> None:
+    """Pool initializer: tie this worker's life to ``parent_pid`` (the build process); ``spare``:
+    the pool's shared count of the cores no task needs (:mod:`assetpipe.core.cores`), or None."""
+    from assetpipe.core import cores
+
+    cores.install(spare)
     if sys.platform.startswith("linux"):
         try:
             import ctypes

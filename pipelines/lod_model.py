@@ -25,12 +25,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Hashable, Sequence
 
 import numpy as np
 
+from assetpipe.core.cores import map_spare
 from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
@@ -375,8 +375,7 @@ def balanced_ratios(meshes: Sequence[tuple], weights: Sequence[int],
     # (meshoptimizer and the BVH query release the GIL); the result does not depend on them
     if threads > 1 and len(meshes) > 1:
         order = sorted(range(len(meshes)), key=lambda i: -m[i])
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            got = dict(zip(order, pool.map(curve, order)))
+        got = dict(zip(order, map_spare(curve, order, threads)))
         raw = [got[i] for i in range(len(meshes))]
     else:
         raw = [curve(i) for i in range(len(meshes))]
@@ -503,12 +502,12 @@ def build_model_lods(parts: Sequence[LodPart], options: LodOptions = DEFAULT_LOD
                                options=opts, threads=level_threads).levels
 
     # distinct meshes are independent: largest first on LOD_THREADS threads (the measuring
-    # kernels release the GIL); each chain is a pure function of its mesh, so the result does
-    # not depend on the thread count or order
+    # kernels release the GIL; in a build's worker, the threads beyond this one use only idle
+    # workers' cores: assetpipe/core/cores.py); each chain is a pure function of its mesh, so
+    # the result does not depend on the thread count or order
     if threads > 1:
         distinct.sort(key=lambda i: -merged[i][3].shape[0])
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            source_levels = dict(zip(distinct, pool.map(chain_of, distinct)))
+        source_levels = dict(zip(distinct, map_spare(chain_of, distinct, threads)))
     else:
         source_levels = {i: chain_of(i) for i in distinct}
     out: list[LodMesh] = []

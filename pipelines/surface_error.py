@@ -45,12 +45,12 @@ meshes are 0 apart. Degenerate triangles are fine (they count as segments or poi
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
+from assetpipe.core.cores import map_spare
 from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
@@ -584,10 +584,10 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
 
     if threads > 1 and len(meshes) > 1 and not ref_empty:
         # what the meshes share is made before the threads start (built once, then only read;
-        # the compiled kernels and the BVH queries release the GIL)
+        # the compiled kernels and the BVH queries release the GIL); in a build's worker, the
+        # threads beyond this one use only idle workers' cores (assetpipe/core/cores.py)
         ref.side.engine, ref.side.weld, ref.side.welded_tri  # noqa: B018
-        with ThreadPoolExecutor(max_workers=min(threads, len(meshes))) as pool:
-            return list(pool.map(one, range(len(meshes))))
+        return map_spare(one, range(len(meshes)), threads)
     return [one(i) for i in range(len(meshes))]
 
 
