@@ -3,9 +3,12 @@
     b"APK1" | u32 header length | header JSON (canonical) | arrays, each 16-byte aligned
 
 The header holds ``meta`` (any JSON) and, per array, its name, dtype, shape, offset and size.
-Same input, same bytes (unlike npz, which stamps times), so step outputs can be keyed by
-their digest and a rebuild that produces the same result stops invalidating what follows.
-No pickle: nothing read from the cache is ever executed.
+Arrays with the same bytes are stored once, their entries sharing the offset (a model placing
+one mesh 98 times, MetalRoughSpheresNoTextures: its LOD step's pack 64.7 -> 40.8 MB and its
+mesh step's 33.4 -> 21.0 MB, the placements' index buffers being equal); a reader needs
+nothing for it, each entry reads its own bytes. Same input, same bytes (unlike npz, which stamps times), so step outputs can be
+keyed by their digest and a rebuild that produces the same result stops invalidating what
+follows. No pickle: nothing read from the cache is ever executed.
 """
 
 from __future__ import annotations
@@ -14,15 +17,21 @@ import json
 import struct
 
 import numpy as np
+import xxhash
 
 MAGIC = b"APK1"
 _ALIGN = 16
+
+
+#: arrays smaller than this are always stored (looking for an equal one would cost more)
+SHARE_MIN_BYTES = 256
 
 
 def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
     entries = []
     chunks = []
     offset = 0
+    stored: dict[bytes, list[tuple[bytes, int]]] = {}  # digest -> (bytes, offset) of arrays stored
     for name in sorted(arrays):
         a = np.asarray(arrays[name], order="C")  # not ascontiguousarray: it makes 0-d arrays 1-d
         if a.dtype.hasobject:
@@ -30,12 +39,21 @@ def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
         if a.dtype.fields is not None or a.dtype.subdtype is not None:  # dtype.str would lose the fields
             raise TypeError(f"array {name!r} has a structured dtype")
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)
+        raw = a.tobytes()
+        entry = {"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "size": a.nbytes}
+        if a.nbytes >= SHARE_MIN_BYTES:
+            same = stored.setdefault(xxhash.xxh3_128_digest(raw), [])
+            at = next((off for other, off in same if other == raw), None)
+            if at is not None:  # the same bytes are stored already: this entry reads them there
+                entries.append({**entry, "offset": at})
+                continue
         pad = -offset % _ALIGN
         chunks.append(b"\0" * pad)
         offset += pad
-        entries.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "offset": offset,
-                        "size": a.nbytes})
-        chunks.append(a.tobytes())
+        if a.nbytes >= SHARE_MIN_BYTES:
+            same.append((raw, offset))
+        entries.append({**entry, "offset": offset})
+        chunks.append(raw)
         offset += a.nbytes
     header = json.dumps({"meta": meta, "arrays": entries}, sort_keys=True, separators=(",", ":"),
                         allow_nan=False).encode()

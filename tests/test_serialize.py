@@ -138,3 +138,31 @@ def test_garbage_refused_with_value_error(data):
     # every refusal of unpack() names what is wrong with the pack (cache/serialize.py)
     with pytest.raises(ValueError, match="not an assetpipe pack|assetpipe pack: |bad array entry"):
         unpack(data)
+
+
+def test_equal_arrays_are_stored_once_and_each_entry_reads_them():
+    """The placements of one mesh have equal index buffers: stored once, every entry reads its
+    own copy back, with its own dtype and shape (equal bytes of another type share them too)."""
+    idx = np.arange(3000, dtype=np.uint32).reshape(-1, 3)
+    other = np.arange(3000, dtype=np.uint32)[::-1].reshape(-1, 3).copy()
+    arrays = {f"{i}.lod0": idx.copy() for i in range(5)}
+    arrays["5.lod0"] = other
+    arrays["bits"] = idx.view(np.float32).reshape(-1)  # the same bytes as float32, flat
+    data = pack({"n": 6}, arrays)
+    alone = pack({"n": 6}, {"0.lod0": idx, "5.lod0": other})
+    assert len(data) - len(alone) < 1000  # five equal buffers and their reinterpretation: one copy
+    meta, back = unpack(data)
+    assert meta == {"n": 6}
+    for name, a in arrays.items():
+        assert back[name].dtype == a.dtype and back[name].shape == a.shape
+        assert back[name].tobytes() == a.tobytes()
+    assert pack({"n": 6}, arrays) == data
+
+
+def test_small_equal_arrays_are_stored_each():
+    small = np.zeros(8, np.uint8)  # below SHARE_MIN_BYTES
+    data = pack({}, {"a": small, "b": small.copy()})
+    _, back = unpack(data)
+    assert np.array_equal(back["a"], small) and np.array_equal(back["b"], small)
+    header_offsets = {e["offset"] for e in json.loads(data[8:8 + struct.unpack_from("<I", data, 4)[0]])["arrays"]}
+    assert len(header_offsets) == 2
