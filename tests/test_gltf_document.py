@@ -26,6 +26,15 @@ def test_view_reads_values_and_missing_keys_as_none():
     assert doc.scenes is None and doc.asset.version == "2.0"
 
 
+def test_a_wrapped_list_or_object_is_made_once():
+    """Reading ``doc.accessors[i]`` for each of many accessors wraps the list once, not once a
+    read (the importer reads a large model's accessors thousands of times)."""
+    doc = GltfObject(GOOD)
+    assert doc.accessors is doc.accessors and doc.meshes[0] is doc.meshes[0]
+    assert doc.meshes[0].primitives[0].attributes is doc.meshes[0].primitives[0].attributes
+    assert doc.accessors[0].count == 1 and doc.accessors[0].byteOffset is None
+
+
 def test_a_sound_document_passes():
     assert check_structure(GOOD) is None
 
