@@ -211,6 +211,10 @@ def _scaled_levels(levels: Sequence[LodLevel], sigma: float, resid: float, diag:
 #: gltfpack's Hausdorff distance (benchmarks/lod.py TABLE 1: 41 -> 40 of 44 cells)
 CURVE_POINTS = 16
 CURVE_LOW = 1e-5
+#: a curve point whose limit is above this fraction of the error meshoptimizer reached at the
+#: next larger limit takes that point's result (:func:`_count_curve`): the margin covers the
+#: float32 squares meshoptimizer compares in (1e-7 relative) many times over
+SAME_BELOW = 1.0 - 1e-4
 #: the fewest triangles a mesh's share of a level is (at least ``min_triangles``): a closed
 #: surface needs 4, and smaller targets can simplify to nothing
 MIN_SHARE = 4
@@ -294,10 +298,19 @@ def _count_curve(pos: np.ndarray, idx: np.ndarray, uv, normals, others, errors: 
     ref_normals = _face_normals(local64, tri0)[0]
     counts, flipped, judged = (np.zeros(errors.shape[0]) for _ in range(3))
     outs: list = [None] * errors.shape[0]
+    reached = math.inf  # meshoptimizer's error of the last point simplified (fraction of the diagonal)
     for k in range(errors.shape[0] - 1, -1, -1):
-        out, _ = simp.simplify(pos32, welded, options.min_triangles, attributes=attrs,
-                               attribute_weights=weights, lock_border=options.lock_border,
-                               target_error=float(errors[k]) / unit / scale)
+        limit = float(errors[k]) / unit  # a fraction of the diagonal
+        if k + 1 < errors.shape[0] and reached <= limit * SAME_BELOW:
+            # every collapse the larger limit made was within this one: meshoptimizer's limit
+            # only cuts its passes short (``c.error > limit: break``), so it makes the same
+            # collapses and stops where it stopped (the target, or no collapse left): the same
+            # result, not simplified again (the large-error end of a curve, where a mesh stalls)
+            out = outs[k + 1]
+        else:
+            out, reached = simp.simplify(pos32, welded, options.min_triangles, attributes=attrs,
+                                         attribute_weights=weights, lock_border=options.lock_border,
+                                         target_error=limit / scale)
         counts[k] = min(out.shape[0], idx.shape[0])
         outs[k] = out
         if counts[k] >= enough:

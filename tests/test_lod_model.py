@@ -267,6 +267,61 @@ def test_count_curve_stops_once_a_mesh_keeps_enough():
     assert (full[0][:stop] >= enough).all()  # what was skipped kept at least enough
 
 
+def test_count_curve_takes_a_stalled_point_from_the_larger_limit(monkeypatch):
+    """Where meshoptimizer stopped below the next smaller limit (the mesh stalled, or reached
+    the target), that point is not simplified again: the curve is the same as with every point
+    simplified, with fewer simplifications."""
+    import assetpipe.pipelines.lod_model as lm
+    import assetpipe.pipelines.simplify as simp
+
+    # boxes that stall at 12 triangles each, and a sphere that keeps collapsing
+    boxes = [trimesh.creation.box(extents=(0.1, 0.1, 0.1)) for _ in range(6)]
+    for i, b in enumerate(boxes):
+        b.apply_translation((0.3 * i, 0.0, 0.0))
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    sphere.apply_translation((1.0, 1.0, 0.0))
+    mesh = trimesh.util.concatenate(boxes + [sphere])
+    v, f = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.uint32)
+    grid = np.geomspace(1e-5, 0.5, 16)
+    calls = []
+    real = simp.simplify
+
+    def count(*args, **kwargs):
+        calls.append(kwargs["target_error"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(simp, "simplify", count)
+    reused = lm._count_curve(v, f, None, None, (), grid, LodOptions())
+    n_reused = len(calls)
+    monkeypatch.setattr(lm, "SAME_BELOW", -np.inf)  # every point simplified
+    calls.clear()
+    every = lm._count_curve(v, f, None, None, (), grid, LodOptions())
+    assert n_reused < len(calls) == 16
+    for a, b in zip(reused, every):
+        assert np.array_equal(a, b)
+
+
+def test_threads_on_spare_cores_do_not_change_the_chains():
+    """In a build's worker the threads beyond the first run only on spare cores
+    (assetpipe/core/cores.py): with one spare, a helper takes meshes, and the chains are the
+    same bit for bit as on one thread."""
+    import multiprocessing
+
+    from assetpipe.core import cores
+
+    parts = [_part(*_bumpy_sphere(3, seed=s, centre=(3.0 * s, 0, 0)), key=s) for s in range(3)]
+    one = build_model_lods(parts, FAST, threads=1)
+    spare = cores.SpareCores(multiprocessing.get_context(), 1)
+    cores.install(spare.value)
+    try:
+        two = build_model_lods(parts, FAST, threads=2)
+    finally:
+        cores.install(None)
+    for a, b in zip(one, two):
+        assert [lv.indices.tobytes() for lv in a.levels] == [lv.indices.tobytes() for lv in b.levels]
+        assert [(lv.hausdorff, lv.rms) for lv in a.levels] == [(lv.hausdorff, lv.rms) for lv in b.levels]
+
+
 def test_balancing_does_not_fold_thin_parts(monkeypatch):
     """A thin bent tube (a leg) beside a bumpy sphere: meshoptimizer's error rates the tube's
     cross-section cheap, so a budget shared by that error alone cuts the tube until it folds
