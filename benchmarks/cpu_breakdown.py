@@ -1,0 +1,161 @@
+"""Where a cold build's CPU goes: per step, per model (beside gltfpack's on the same file), and
+inside the LOD steps. A diagnosis, not a goal: it says which part a speed-up has to come from.
+
+Run:  .venv/bin/python benchmarks/cpu_breakdown.py [INPUT ...] [--no-models] [--no-gltfpack]
+
+Everything runs in this process with ``-j 1`` (steps inline, one thread a step), after a
+warm-up build of a small model so that the compiled kernels are loaded before anything is
+timed (a ``-j 2`` build forks its workers from a process that loaded them). CPU is this
+process's (``time.process_time``).
+
+1. The inputs (default: the shared corpus) built cold: CPU per step kind, and inside the LOD
+   steps the recorded bounds (``measure_levels``), the candidates' estimates, the candidates'
+   simplifications (meshoptimizer's WASM ``simplifyWithUpdate`` separately) and the balance
+   curves, each timed by wrapping it.
+2. With ``--models`` (the default), each model file built cold alone: its CPU against
+   ``gltfpack -si 0.5`` on the same file (CPU of the process, its start-up included: what the
+   cold-build benchmark runs), largest first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+from cold_build import CORPUS, find_gltfpack  # noqa: E402
+
+
+def _build(inputs: list[str], folder: str) -> None:
+    from assetpipe.cli import main
+
+    try:
+        main(["build", *inputs, "-o", f"{folder}/out", "--cache", f"{folder}/cache", "-j", "1", "-q"],
+             standalone_mode=False)
+    except SystemExit:
+        pass
+
+
+class Timer:
+    """CPU seconds of wrapped functions, by label (a function called from another wrapped one
+    counts in both)."""
+
+    def __init__(self) -> None:
+        self.seconds: collections.Counter = collections.Counter()
+        self.calls: collections.Counter = collections.Counter()
+
+    def wrap(self, owner, name: str, label: str | None = None) -> None:
+        real = getattr(owner, name)
+        label = label or name
+
+        def timed(*args, **kwargs):
+            t = time.process_time()
+            try:
+                return real(*args, **kwargs)
+            finally:
+                self.seconds[label] += time.process_time() - t
+                self.calls[label] += 1
+
+        setattr(owner, name, timed)
+
+
+ORDER = ("recorded bounds (measure_levels)", "candidates' estimates", "candidates' simplifications",
+         "  of them meshoptimizer's WASM (moved)", "balance curves")
+
+
+def breakdown(inputs: list[str]) -> None:
+    from assetpipe import steps
+    from assetpipe.pipelines import lod, lod_model, meshopt_wasm
+
+    by_step = Timer()
+    real_call = steps.call_task
+
+    def call_task(fn, *args):
+        t = time.process_time()
+        try:
+            return real_call(fn, *args)
+        finally:
+            by_step.seconds[fn.__name__] += time.process_time() - t
+            by_step.calls[fn.__name__] += 1
+
+    inner = Timer()
+    lod_model.LOD_THREADS = 1  # one thread: the wrapped parts' CPU adds up to the step's
+    for (owner, name), label in zip([(lod, "measure_levels"), (lod._Estimator, "__call__"),
+                                     (lod, "_candidates"), (meshopt_wasm, "simplify_with_update"),
+                                     (lod_model, "balanced_ratios")], ORDER):
+        inner.wrap(owner, name, label)
+    with tempfile.TemporaryDirectory() as d:
+        _build([str(REPO / "examples")], f"{d}/warm")
+        steps.call_task = call_task
+        try:
+            t = time.process_time()
+            _build(inputs, f"{d}/cold")
+            total = time.process_time() - t
+        finally:
+            steps.call_task = real_call
+    print(f"cold build of {', '.join(inputs)} at -j 1: {total:.2f} s of CPU")
+    for name, s in by_step.seconds.most_common():
+        print(f"  {name:24s} {s:7.2f} s  ({by_step.calls[name]} calls)")
+    print(f"  {'(outside the steps)':24s} {total - sum(by_step.seconds.values()):7.2f} s")
+    print(f"inside the LOD steps (of {by_step.seconds['task_lod']:.2f} s):")
+    for name in ORDER:
+        print(f"  {name:40s} {inner.seconds[name]:7.2f} s  ({inner.calls[name]} calls)")
+
+
+def per_model(inputs: list[str], gltfpack: str | None) -> None:
+    from assetpipe.inputs import discover_inputs
+
+    files = discover_inputs(inputs)
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        _build([str(REPO / "examples")], f"{d}/warm")
+        for i, f in enumerate(files):
+            t = time.process_time()
+            _build([str(f)], f"{d}/m{i}")
+            ours = time.process_time() - t
+            theirs = None
+            if gltfpack is not None:
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                r = subprocess.run([gltfpack, "-i", str(f), "-o", f"{d}/g{i}.glb", "-si", "0.5"],
+                                   capture_output=True)
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                if r.returncode == 0:
+                    theirs = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+            rows.append((ours, theirs, os.path.relpath(f, inputs[0]) if len(inputs) == 1 else str(f)))
+    rows.sort(key=lambda r: -r[0])
+    print("per model, built alone (CPU s): ours, gltfpack -si 0.5 (its process start-up included)")
+    for ours, theirs, name in rows:
+        g = f"{theirs:6.2f}  {ours / theirs:5.1f}x" if theirs else "     -       "
+        print(f"  {ours:6.2f}  {g}  {name}")
+    known = [r for r in rows if r[1]]
+    if known:
+        print(f"  total {sum(r[0] for r in known):.2f} s against {sum(r[1] for r in known):.2f} s "
+              f"over {len(known)} files both built")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("inputs", nargs="*", help="models or folders (default: the shared corpus)")
+    ap.add_argument("--no-models", action="store_true", help="skip the per-model part")
+    ap.add_argument("--no-gltfpack", action="store_true", help="per model, ours only")
+    args = ap.parse_args()
+    inputs = args.inputs or [str(CORPUS)]
+    if not all(Path(p).exists() for p in inputs):
+        sys.exit(f"no such input: {[p for p in inputs if not Path(p).exists()]}")
+    breakdown(inputs)
+    if not args.no_models:
+        per_model(inputs, None if args.no_gltfpack else find_gltfpack())
+
+
+if __name__ == "__main__":
+    main()
