@@ -68,8 +68,18 @@ import sys
 from assetpipe.graph import Executor
 
 def loaded():
-    mod = sys.modules.get("assetpipe.pipelines.closest_point")
-    return mod is not None and len(mod._query.signatures) > 0
+    lod = sys.modules.get("assetpipe.pipelines.closest_point")
+    tex = sys.modules.get("assetpipe.pipelines.texture_mips")
+    return (lod is not None and len(lod._query.signatures) > 0
+            and tex is not None and len(tex._encode_rows.signatures) > 0)
+
+def big_chain():
+    # OpenCV's pthreads pool was loaded by the parent's warm-up: a forked worker still filters
+    # a large image (its resize runs in parallel) instead of waiting for threads it lacks
+    import numpy as np
+    from assetpipe.pipelines.texture_mips import build_mip_chain
+    rgba = (np.random.default_rng(0).random((2048, 2048, 4)) * 255).astype(np.uint8)
+    return len(build_mip_chain(rgba, "baseColor", "BLEND").levels)
 
 if __name__ == "__main__":
     ex = Executor(2)
@@ -78,16 +88,18 @@ if __name__ == "__main__":
         ex.warm()
         ex.fresh_pool()
         warm = [r[:2] for r in ex.map([(loaded,), (loaded,)])]
+        chains = [r[:2] for r in ex.map([(big_chain,), (big_chain,)])]
     finally:
         ex.close()
-    print(cold == [("ok", False)] * 2, warm == [("ok", True)] * 2)
+    print(cold == [("ok", False)] * 2, warm == [("ok", True)] * 2, chains == [("ok", 12)] * 2)
 """
 
 
 def test_workers_forked_after_warming_inherit_the_lod_kernels(tmp_path):
     """A fresh build process (not this test process, which has loaded kernels already): its
     first workers load no kernels; after warm() and fresh_pool() the new workers start with
-    the ones the parent loaded (0.7 s a process saved)."""
+    the LOD and texture kernels the parent loaded (0.7 s a process saved), and OpenCV, which
+    the warm-up loaded in the parent, still works in them."""
     import subprocess
     import sys
 
@@ -95,7 +107,7 @@ def test_workers_forked_after_warming_inherit_the_lod_kernels(tmp_path):
     script.write_text(_WARM_SCRIPT)
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split() == ["True", "True"]
+    assert out.stdout.split() == ["True", "True", "True"]
     from assetpipe.graph import Executor
 
     inline = Executor(1)  # no pool: nothing to warm, nothing to fork
