@@ -379,8 +379,19 @@ def _read_image(store, image: dict, model_dir: str):
                        digest=digest_bytes(data))
 
 
-def _texture_result(store, src, pt) -> dict:
-    blobs = {"ktx2": store.put_blob(pt.ktx2), "level0": store.put_blob(pt.level0)}
+def _texture_result(store, src, pt, stored: dict | None = None) -> dict:
+    """A texture use's record. ``stored``: id of bytes -> (bytes, digest) of the blobs this task
+    put already: uses that share a chain (or level 0's source bytes) share the same bytes
+    objects, which ``put_blob`` would hash again and, finding them stored, read back and hash a
+    third time (22 MB for a 2048^2 chain)."""
+    def put(data: bytes) -> str:
+        if stored is None:
+            return store.put_blob(data)
+        if id(data) not in stored:
+            stored[id(data)] = (data, store.put_blob(data))  # the bytes kept: their id stays theirs
+        return stored[id(data)][1]
+
+    blobs = {"ktx2": put(pt.ktx2), "level0": put(pt.level0)}
     meta = {"width": pt.width, "height": pt.height, "levels": pt.levels, "vkFormat": pt.vk_format,
             "colorSpace": pt.color_space, "level0Ext": pt.level0_ext, "level0Shared": pt.level0_shared,
             "hasAlphaBelow255": pt.has_alpha_below_255, "meanDrift": list(pt.mean_drift),
@@ -414,9 +425,9 @@ def task_texture_uses(store_root: str, image: dict, model_dir: str, uses: list, 
     store = Store(Path(store_root))
     src = _read_image(store, image, model_dir)
     results = process_texture_uses(src, [tuple(u) for u in uses], options_from_json(TextureOptions, texture_options))
-    blobs, metas = {}, []
+    blobs, metas, stored = {}, [], {}
     for i, pt in enumerate(results):
-        one = _texture_result(store, src, pt)
+        one = _texture_result(store, src, pt, stored)
         blobs.update({f"{k}.{i}": v for k, v in one["blobs"].items()})
         metas.append(one["meta"])
     return {"blobs": blobs, "meta": {"uses": metas}}

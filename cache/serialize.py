@@ -6,9 +6,10 @@ The header holds ``meta`` (any JSON) and, per array, its name, dtype, shape, off
 Arrays with the same bytes are stored once, their entries sharing the offset (a model placing
 one mesh 98 times, MetalRoughSpheresNoTextures: its LOD step's pack 64.7 -> 40.8 MB and its
 mesh step's 33.4 -> 21.0 MB, the placements' index buffers being equal); a reader needs
-nothing for it, each entry reads its own bytes. Same input, same bytes (unlike npz, which stamps times), so step outputs can be
-keyed by their digest and a rebuild that produces the same result stops invalidating what
-follows. No pickle: nothing read from the cache is ever executed.
+nothing for it, each entry reads its own bytes. Same input, same bytes (unlike npz, which
+stamps times), so step outputs can be keyed by their digest and a rebuild that produces the
+same result stops invalidating what follows. No pickle: nothing read from the cache is ever
+executed.
 """
 
 from __future__ import annotations

@@ -301,22 +301,33 @@ def test_count_curve_takes_a_stalled_point_from_the_larger_limit(monkeypatch):
         assert np.array_equal(a, b)
 
 
-def test_threads_on_spare_cores_do_not_change_the_chains():
+def test_threads_on_spare_cores_do_not_change_the_chains(monkeypatch):
     """In a build's worker the threads beyond the first run only on spare cores
-    (assetpipe/core/cores.py): with one spare, a helper takes meshes, and the chains are the
-    same bit for bit as on one thread."""
+    (assetpipe/core/cores.py): with one spare, a helper thread builds some of the chains, and
+    they are the same bit for bit as on one thread."""
     import multiprocessing
+    import threading
 
+    import assetpipe.pipelines.lod_model as lod_model
     from assetpipe.core import cores
 
     parts = [_part(*_bumpy_sphere(3, seed=s, centre=(3.0 * s, 0, 0)), key=s) for s in range(3)]
     one = build_model_lods(parts, FAST, threads=1)
+    ran_on = set()
+    real = lod_model.build_lod_chain
+
+    def chain(*args, **kwargs):
+        ran_on.add(threading.get_ident())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(lod_model, "build_lod_chain", chain)
     spare = cores.SpareCores(multiprocessing.get_context(), 1)
     cores.install(spare.value)
     try:
         two = build_model_lods(parts, FAST, threads=2)
     finally:
         cores.install(None)
+    assert len(ran_on) == 2  # this thread and a helper on the spare core
     for a, b in zip(one, two):
         assert [lv.indices.tobytes() for lv in a.levels] == [lv.indices.tobytes() for lv in b.levels]
         assert [(lv.hausdorff, lv.rms) for lv in a.levels] == [(lv.hausdorff, lv.rms) for lv in b.levels]

@@ -79,3 +79,40 @@ def test_meshes_with_materials_equal_in_content_are_merged_for_lod(corpus, tmp_p
     assert not r.failed
     side = json.loads((tmp_path / "out/2CylinderEngine.asset.json").read_text())
     assert len(side["meshes"]) == 7 and len(side["materials"]) == 34
+
+
+def test_an_image_with_uses_sharing_a_chain_stores_each_blob_once(tmp_path, monkeypatch):
+    """An ORM image used as occlusion and metallicRoughness (one chain) and kept as its own
+    bytes for level 0: task_texture_uses puts each distinct blob once (not once per use: each
+    put hashes it, and a blob found stored is read back and hashed again), and each use's record
+    is the one task_texture makes of it alone."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from assetpipe.cache.store import Store
+    from assetpipe.core.hashing import digest_bytes
+    from assetpipe.steps import task_texture, task_texture_uses, texture_use_record
+
+    rgb = (np.random.default_rng(3).random((64, 64, 3)) * 255).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(rgb).save(buf, format="PNG")
+    (tmp_path / "orm.png").write_bytes(buf.getvalue())
+    image = {"path": "orm.png", "name": "orm.png", "mime": "image/png", "digest": digest_bytes(buf.getvalue())}
+    uses = [["occlusion", "OPAQUE", 0.5], ["metallicRoughness", "OPAQUE", 0.5]]
+    store_root = str(tmp_path / "cache")
+    Store(tmp_path / "cache")
+    puts = []
+    real = Store.put_blob
+
+    def counting(self, data):
+        puts.append(len(data))
+        return real(self, data)
+
+    monkeypatch.setattr(Store, "put_blob", counting)
+    rec = task_texture_uses(store_root, image, str(tmp_path), uses, {})
+    assert len(puts) == 2  # the one chain's KTX2 and the image's own bytes for level 0
+    monkeypatch.setattr(Store, "put_blob", real)
+    for i, (role, alpha, cutoff) in enumerate(uses):
+        assert texture_use_record(rec, i) == task_texture(store_root, image, str(tmp_path), role, alpha, cutoff, {})

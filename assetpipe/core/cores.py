@@ -59,10 +59,6 @@ def install(spare) -> None:
     _spare = spare
 
 
-def installed() -> bool:
-    return _spare is not None
-
-
 def _take(spare) -> bool:
     with spare.get_lock():
         if spare.value > 0:
@@ -144,4 +140,4 @@ def map_spare(fn: Callable[[T], R], items: Sequence[T], max_threads: int) -> lis
     return results
 
 
-__all__ = ["SpareCores", "install", "installed", "map_spare", "POLL_S"]
+__all__ = ["SpareCores", "install", "map_spare", "POLL_S"]
