@@ -7,6 +7,9 @@ Run:  .venv/bin/python benchmarks/lod.py            (everything; long: 1M sample
           --variants ours --no-recorded --samples 100000   (TABLE 1 for a few cells, quickly)
       .venv/bin/python benchmarks/lod.py --cad --no-corpus --no-big --no-simplifiers --no-recorded
           (TABLE 1 on generated CAD-style models the corpus does not hold: benchmarks/cad_models.py)
+      .venv/bin/python benchmarks/lod.py --unseen --no-corpus --no-big --no-simplifiers --variants ours
+          (TABLE 1 and TABLE 2 on five generated models of kinds the corpus does not hold, nothing
+          tuned on them: benchmarks/unseen_models.py)
 
 Simplifier table: for every file (loaded with trimesh and merged into one mesh, node
 transforms applied) and every simplifier (meshopt, meshopt-attr, meshopt+lock_border, sloppy,
@@ -298,7 +301,12 @@ def main() -> int:
     ap.add_argument("--cad", action="store_true",
                     help="also the generated CAD-style models of benchmarks/cad_models.py (an assembly "
                          "of 62 small parts, a piping plant): models the corpus does not hold")
-    ap.add_argument("--no-corpus", action="store_true", help="no corpus files (with --cad: those alone)")
+    ap.add_argument("--unseen", action="store_true",
+                    help="also the generated models of benchmarks/unseen_models.py (a far-off noisy "
+                         "scan, a small merged CAD part, a terrain with tiled UVs, a two-sheet shell, "
+                         "a cracked seam): kinds the corpus does not hold, nothing tuned on them")
+    ap.add_argument("--no-corpus", action="store_true",
+                    help="no corpus files (with --cad / --unseen: those alone)")
     ap.add_argument("--no-gltfpack", action="store_true")
     ap.add_argument("--measure-variants", action="store_true",
                     help="build the ours-chained/-direct/-per-mesh variants with error measurement too")
@@ -337,6 +345,12 @@ def main() -> int:
         from cad_models import write_cad_models  # noqa: PLC0415 - beside this file
 
         for name, path in write_cad_models(tmp / "cad"):
+            meshes.append((name, path, load_merged(path)))
+    if args.unseen:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from unseen_models import write_unseen_models  # noqa: PLC0415 - beside this file
+
+        for name, path in write_unseen_models(tmp / "unseen"):
             meshes.append((name, path, load_merged(path)))
     if not (args.quick or args.no_big):
         import trimesh
