@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/run_all.py [--quick] [--only import,incremental] [--skip validate]
 
 Order: import.py, incremental.py, then the other ``benchmarks/*.py`` scripts by name (mips.py,
-lod.py, validate.py, ...; this runner and files starting with ``_`` are not benchmarks).
+lod.py, validate.py, ...; this runner, files starting with ``_`` and modules without a
+``__main__`` block, such as the generated models of cad_models.py, are not benchmarks).
 ``--quick`` is passed to the scripts that accept it (those whose source defines a ``--quick``
 option); the others run with their defaults. Each script's output streams through under a
 header; a summary of exit codes follows. Benchmarks run one at a time, never in parallel, so
@@ -22,8 +23,15 @@ HERE = Path(__file__).resolve().parent
 FIRST = ("import.py", "incremental.py")
 
 
+def _is_script(p: Path) -> bool:
+    """A benchmark runs as a script; a module of generated models the others import
+    (cad_models.py, unseen_models.py) has no ``__main__`` block and is not run."""
+    return '__name__ == "__main__"' in p.read_text(encoding="utf-8", errors="replace")
+
+
 def benchmarks() -> list[Path]:
-    scripts = [p for p in HERE.glob("*.py") if p.name != Path(__file__).name and not p.name.startswith("_")]
+    scripts = [p for p in HERE.glob("*.py")
+               if p.name != Path(__file__).name and not p.name.startswith("_") and _is_script(p)]
     return sorted(scripts, key=lambda p: (FIRST.index(p.name) if p.name in FIRST else len(FIRST), p.name))
 
 
