@@ -54,19 +54,23 @@ class Timer:
         self.seconds: collections.Counter = collections.Counter()
         self.calls: collections.Counter = collections.Counter()
 
-    def wrap(self, owner, name: str, label: str | None = None) -> None:
+    def wrap(self, owner, name: str, label=None):
+        """Time ``owner.name`` from now on; ``label``: a name, or a function of the call's
+        arguments giving one (default: ``name``). Returns the function it replaced."""
         real = getattr(owner, name)
-        label = label or name
+        label_of = label if callable(label) else (lambda *a, **k: label or name)
 
         def timed(*args, **kwargs):
             t = time.process_time()
             try:
                 return real(*args, **kwargs)
             finally:
-                self.seconds[label] += time.process_time() - t
-                self.calls[label] += 1
+                key = label_of(*args, **kwargs)
+                self.seconds[key] += time.process_time() - t
+                self.calls[key] += 1
 
         setattr(owner, name, timed)
+        return real
 
 
 ORDER = ("recorded bounds (measure_levels)", "candidates' estimates", "candidates' simplifications",
@@ -78,16 +82,6 @@ def breakdown(inputs: list[str]) -> None:
     from assetpipe.pipelines import lod, lod_model, meshopt_wasm
 
     by_step = Timer()
-    real_call = steps.call_task
-
-    def call_task(fn, *args):
-        t = time.process_time()
-        try:
-            return real_call(fn, *args)
-        finally:
-            by_step.seconds[fn.__name__] += time.process_time() - t
-            by_step.calls[fn.__name__] += 1
-
     inner = Timer()
     lod_model.LOD_THREADS = 1  # one thread: the wrapped parts' CPU adds up to the step's
     for (owner, name), label in zip([(lod, "measure_levels"), (lod._Estimator, "__call__"),
@@ -96,7 +90,7 @@ def breakdown(inputs: list[str]) -> None:
         inner.wrap(owner, name, label)
     with tempfile.TemporaryDirectory() as d:
         _build([str(REPO / "examples")], f"{d}/warm")
-        steps.call_task = call_task
+        real_call = by_step.wrap(steps, "call_task", label=lambda fn, *args: fn.__name__)
         try:
             t = time.process_time()
             _build(inputs, f"{d}/cold")
