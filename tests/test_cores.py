@@ -21,15 +21,30 @@ def spare():
     cores.install(None)
 
 
-def _recorder(delay: float = 0.0, on_helper=None):
-    """fn(x) -> x * x, recording which thread ran each item."""
+#: how long the calling thread's first item waits for a helper to start one (``await_helper``):
+#: a bound for a starved machine, not a delay (it ends as soon as a helper runs)
+HELPER_WAIT_S = 10.0
+
+
+def _recorder(delay: float = 0.0, on_helper=None, await_helper: bool = False):
+    """fn(x) -> x * x, recording which thread ran each item. ``await_helper``: the calling
+    thread's first item waits (at most HELPER_WAIT_S) until a helper thread has started an item,
+    so that a test of helpers does not depend on how soon the machine schedules one."""
     ran: dict[int, int] = {}
     main = threading.get_ident()
+    helper_started = threading.Event()
+    waited: list[int] = []
 
     def fn(x: int) -> int:
-        ran[x] = threading.get_ident()
-        if on_helper is not None and ran[x] != main:
-            on_helper(x)
+        me = threading.get_ident()
+        ran[x] = me
+        if me != main:
+            helper_started.set()
+            if on_helper is not None:
+                on_helper(x)
+        elif await_helper and not waited:
+            waited.append(x)  # only the first item waits
+            helper_started.wait(HELPER_WAIT_S)
         time.sleep(delay)
         return x * x
 
@@ -62,7 +77,7 @@ def test_no_spare_core_means_no_helper(spare):
 
 def test_a_spare_core_is_used_and_given_back(spare):
     spare.value = 1
-    fn, ran, main = _recorder(delay=0.02)
+    fn, ran, main = _recorder(delay=0.02, await_helper=True)
     assert cores.map_spare(fn, list(range(10)), 2) == [x * x for x in range(10)]
     assert len(set(ran.values())) == 2  # a helper took some of the items
     deadline = time.monotonic() + 2.0  # its core comes back once it has run out of items
@@ -80,7 +95,7 @@ def test_a_helper_gives_its_core_back_when_a_task_is_handed_out(spare):
         with spare.get_lock():
             spare.value -= 1
 
-    fn, ran, main = _recorder(delay=0.02, on_helper=hand_out_a_task)
+    fn, ran, main = _recorder(delay=0.02, on_helper=hand_out_a_task, await_helper=True)
     assert cores.map_spare(fn, list(range(10)), 2) == [x * x for x in range(10)]
     helpers = [x for x, t in ran.items() if t != main]
     assert len(helpers) == 1

@@ -315,9 +315,17 @@ def test_threads_on_spare_cores_do_not_change_the_chains(monkeypatch):
     one = build_model_lods(parts, FAST, threads=1)
     ran_on = set()
     real = lod_model.build_lod_chain
+    main = threading.get_ident()
+    helper_started = threading.Event()
 
     def chain(*args, **kwargs):
         ran_on.add(threading.get_ident())
+        if threading.get_ident() != main:
+            helper_started.set()
+        elif len(ran_on) == 1:
+            # this thread's first chain waits (at most 10 s, on a starved machine) for the
+            # helper to start one: the test then does not depend on how soon a thread is scheduled
+            helper_started.wait(10.0)
         return real(*args, **kwargs)
 
     monkeypatch.setattr(lod_model, "build_lod_chain", chain)
