@@ -11,7 +11,9 @@ process's (``time.process_time``).
 1. The inputs (default: the shared corpus) built cold: CPU per step kind, and inside the LOD
    steps the recorded bounds (``measure_levels``), the candidates' estimates, the candidates'
    simplifications (meshoptimizer's WASM ``simplifyWithUpdate`` separately) and the balance
-   curves, each timed by wrapping it.
+   curves, each timed by wrapping it; then the recorded bounds split by direction (level 0 ->
+   level, level -> level 0) and level size: CPU, first-pass cells (the source side's
+   triangles) and engine queries.
 2. With ``--models`` (the default), each model file built cold alone: its CPU against
    ``gltfpack -si 0.5`` on the same file (CPU of the process, its start-up included: what the
    cold-build benchmark runs), largest first.
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import math
 import os
 import resource
 import subprocess
@@ -73,16 +76,50 @@ class Timer:
         return real
 
 
+class DirectionTimer:
+    """CPU, first-pass cells and engine queries of the recorded bound's directions
+    (``surface_error._direction``), by direction and by the level's size against level 0 (the
+    nearest power of two of its triangle ratio: a balanced mesh's levels fall in the bucket
+    nearest their own ratio)."""
+
+    def __init__(self) -> None:
+        self.rows: dict[tuple[str, int], list[float]] = collections.defaultdict(lambda: [0.0, 0, 0])
+
+    def wrap(self, owner) -> None:
+        real = owner._direction
+
+        def timed(src, dst, *args, **kwargs):
+            t = time.process_time()
+            res = real(src, dst, *args, **kwargs)
+            forward = src.tri.shape[0] >= dst.tri.shape[0]  # level 0 -> level: what was lost
+            small, big = sorted((src.tri.shape[0], dst.tri.shape[0]))
+            bucket = round(math.log2(big / small)) if small else 0
+            row = self.rows[("level 0 -> level" if forward else "level -> level 0", bucket)]
+            row[0] += time.process_time() - t
+            row[1] += src.tri.shape[0]
+            row[2] += res[0].queries
+            return res
+
+        owner._direction = timed
+
+    def report(self) -> None:
+        print("  the recorded bounds by direction and level size (triangles of level 0 / the level ~ 2^k):")
+        for (name, k), (secs, cells, queries) in sorted(self.rows.items(), key=lambda kv: (kv[0][0], kv[0][1])):
+            print(f"    {name:18s} 1/{2 ** k:<4d} {secs:7.2f} s  {cells:9d} first-pass cells  {queries:9d} queries")
+
+
 ORDER = ("recorded bounds (measure_levels)", "candidates' estimates", "candidates' simplifications",
          "  of them meshoptimizer's WASM (moved)", "balance curves")
 
 
 def breakdown(inputs: list[str]) -> None:
     from assetpipe import steps
-    from assetpipe.pipelines import lod, lod_model, meshopt_wasm
+    from assetpipe.pipelines import lod, lod_model, meshopt_wasm, surface_error
 
     by_step = Timer()
     inner = Timer()
+    directions = DirectionTimer()
+    directions.wrap(surface_error)
     lod_model.LOD_THREADS = 1  # one thread: the wrapped parts' CPU adds up to the step's
     for (owner, name), label in zip([(lod, "measure_levels"), (lod._Estimator, "__call__"),
                                      (lod, "_candidates"), (meshopt_wasm, "simplify_with_update"),
@@ -90,6 +127,8 @@ def breakdown(inputs: list[str]) -> None:
         inner.wrap(owner, name, label)
     with tempfile.TemporaryDirectory() as d:
         _build([str(REPO / "examples")], f"{d}/warm")
+        # the wrapped parts count from here (the warm-up build's LOD steps ran through them too)
+        inner.seconds.clear(), inner.calls.clear(), directions.rows.clear()
         real_call = by_step.wrap(steps, "call_task", label=lambda fn, *args: fn.__name__)
         try:
             t = time.process_time()
@@ -104,6 +143,7 @@ def breakdown(inputs: list[str]) -> None:
     print(f"inside the LOD steps (of {by_step.seconds['task_lod']:.2f} s):")
     for name in ORDER:
         print(f"  {name:40s} {inner.seconds[name]:7.2f} s  ({inner.calls[name]} calls)")
+    directions.report()
 
 
 def per_model(inputs: list[str], gltfpack: str | None) -> None:
