@@ -51,61 +51,52 @@ def _build(inputs: list[str], folder: str) -> None:
 
 class Timer:
     """CPU seconds of wrapped functions, by label (a function called from another wrapped one
-    counts in both)."""
+    counts in both), and any counts ``tally`` takes from their results."""
 
     def __init__(self) -> None:
         self.seconds: collections.Counter = collections.Counter()
         self.calls: collections.Counter = collections.Counter()
+        self.counts: dict = collections.defaultdict(collections.Counter)
 
-    def wrap(self, owner, name: str, label=None):
+    def wrap(self, owner, name: str, label=None, tally=None):
         """Time ``owner.name`` from now on; ``label``: a name, or a function of the call's
-        arguments giving one (default: ``name``). Returns the function it replaced."""
+        arguments giving one (default: ``name``); ``tally``: a function of (result, the call's
+        arguments) giving a dict of counts added to ``counts[label]``. Returns the function it
+        replaced."""
         real = getattr(owner, name)
         label_of = label if callable(label) else (lambda *a, **k: label or name)
 
         def timed(*args, **kwargs):
             t = time.process_time()
+            result = None
             try:
-                return real(*args, **kwargs)
+                result = real(*args, **kwargs)
+                return result
             finally:
                 key = label_of(*args, **kwargs)
                 self.seconds[key] += time.process_time() - t
                 self.calls[key] += 1
+                if tally is not None and result is not None:
+                    self.counts[key].update(tally(result, *args, **kwargs))
 
         setattr(owner, name, timed)
         return real
 
+    def clear(self) -> None:
+        self.seconds.clear(), self.calls.clear(), self.counts.clear()
 
-class DirectionTimer:
-    """CPU, first-pass cells and engine queries of the recorded bound's directions
-    (``surface_error._direction``), by direction and by the level's size against level 0 (the
-    nearest power of two of its triangle ratio: a balanced mesh's levels fall in the bucket
-    nearest their own ratio)."""
 
-    def __init__(self) -> None:
-        self.rows: dict[tuple[str, int], list[float]] = collections.defaultdict(lambda: [0.0, 0, 0])
+def _direction_label(src, dst, *args, **kwargs) -> tuple[str, int]:
+    """A recorded bound's direction (``surface_error._direction(src, dst, ...)``) and the level's
+    size against level 0: k where the level has about 1/2^k of level 0's triangles (the nearest
+    power of two: a balanced mesh's levels fall in the bucket nearest their own ratio)."""
+    small, big = sorted((src.tri.shape[0], dst.tri.shape[0]))
+    k = round(math.log2(big / small)) if small else 0
+    return ("level 0 -> level" if src.tri.shape[0] >= dst.tri.shape[0] else "level -> level 0", k)
 
-    def wrap(self, owner) -> None:
-        real = owner._direction
 
-        def timed(src, dst, *args, **kwargs):
-            t = time.process_time()
-            res = real(src, dst, *args, **kwargs)
-            forward = src.tri.shape[0] >= dst.tri.shape[0]  # level 0 -> level: what was lost
-            small, big = sorted((src.tri.shape[0], dst.tri.shape[0]))
-            bucket = round(math.log2(big / small)) if small else 0
-            row = self.rows[("level 0 -> level" if forward else "level -> level 0", bucket)]
-            row[0] += time.process_time() - t
-            row[1] += src.tri.shape[0]
-            row[2] += res[0].queries
-            return res
-
-        owner._direction = timed
-
-    def report(self) -> None:
-        print("  the recorded bounds by direction and level size (triangles of level 0 / the level ~ 2^k):")
-        for (name, k), (secs, cells, queries) in sorted(self.rows.items(), key=lambda kv: (kv[0][0], kv[0][1])):
-            print(f"    {name:18s} 1/{2 ** k:<4d} {secs:7.2f} s  {cells:9d} first-pass cells  {queries:9d} queries")
+def _direction_tally(result, src, dst, *args, **kwargs) -> dict:
+    return {"cells": src.tri.shape[0], "queries": result[0].queries}
 
 
 ORDER = ("recorded bounds (measure_levels)", "candidates' estimates", "candidates' simplifications",
@@ -118,8 +109,8 @@ def breakdown(inputs: list[str]) -> None:
 
     by_step = Timer()
     inner = Timer()
-    directions = DirectionTimer()
-    directions.wrap(surface_error)
+    directions = Timer()
+    directions.wrap(surface_error, "_direction", _direction_label, _direction_tally)
     lod_model.LOD_THREADS = 1  # one thread: the wrapped parts' CPU adds up to the step's
     for (owner, name), label in zip([(lod, "measure_levels"), (lod._Estimator, "__call__"),
                                      (lod, "_candidates"), (meshopt_wasm, "simplify_with_update"),
@@ -128,7 +119,7 @@ def breakdown(inputs: list[str]) -> None:
     with tempfile.TemporaryDirectory() as d:
         _build([str(REPO / "examples")], f"{d}/warm")
         # the wrapped parts count from here (the warm-up build's LOD steps ran through them too)
-        inner.seconds.clear(), inner.calls.clear(), directions.rows.clear()
+        inner.clear(), directions.clear()
         real_call = by_step.wrap(steps, "call_task", label=lambda fn, *args: fn.__name__)
         try:
             t = time.process_time()
@@ -143,7 +134,11 @@ def breakdown(inputs: list[str]) -> None:
     print(f"inside the LOD steps (of {by_step.seconds['task_lod']:.2f} s):")
     for name in ORDER:
         print(f"  {name:40s} {inner.seconds[name]:7.2f} s  ({inner.calls[name]} calls)")
-    directions.report()
+    print("  the recorded bounds by direction, and by level size (the level has about 1/N of level 0's triangles):")
+    for (name, k) in sorted(directions.seconds):
+        c = directions.counts[(name, k)]
+        print(f"    {name:18s} 1/{2 ** k:<4d} {directions.seconds[(name, k)]:7.2f} s  "
+              f"{c['cells']:9d} first-pass cells  {c['queries']:9d} queries")
 
 
 def per_model(inputs: list[str], gltfpack: str | None) -> None:
