@@ -170,12 +170,21 @@ def main() -> int:
     args = ap.parse_args()
     extra = {}
     for item in args.set:
-        field, _, value = item.partition("=")
+        field, sep, value = item.partition("=")
         default = getattr(lod.DEFAULT_LOD_OPTIONS, field, None)
-        if not _ or default is None and field not in lod.LodOptions.__dataclass_fields__:
-            ap.error(f"--set {item!r}: not FIELD=VALUE with a LodOptions field")
-        extra[field] = (value.lower() in ("1", "true", "yes", "on")) if isinstance(default, bool) \
-            else type(default)(value) if default is not None else value
+        if not sep or field not in lod.LodOptions.__dataclass_fields__ \
+                or not isinstance(default, (bool, int, float, str)):
+            ap.error(f"--set {item!r}: not FIELD=VALUE with a LodOptions field holding a bool, "
+                     "number or string")
+        if isinstance(default, bool):
+            if value.lower() not in ("true", "false", "1", "0", "yes", "no", "on", "off"):
+                ap.error(f"--set {item!r}: {field} is true or false")
+            extra[field] = value.lower() in ("true", "1", "yes", "on")
+        else:
+            try:
+                extra[field] = type(default)(value)
+            except ValueError:
+                ap.error(f"--set {item!r}: {field} is a {type(default).__name__}")
     exe = lod.find_gltfpack()
     if exe is None:
         print("gltfpack not found (scripts/setup.sh installs it): nothing to compare")
