@@ -37,7 +37,7 @@ levels only differ where a stalled step picks among pruning and sloppy).
 Printed at the end, from this one run:
 * TABLE 1: per (mesh, ratio) cell, gltfpack's Hausdorff and each variant's as a multiple of
   it; per variant the share of cells within 1.1x gltfpack's (goal >= 90%). A cell is one draw of
-  each simplifier, and meshoptimizer's largest error moves by up to 2x between triangle orders
+  each simplifier, and meshoptimizer's largest error moves by up to 2.5x between triangle orders
   of one mesh: ``benchmarks/lod_draws.py`` compares medians over several orders;
 * TABLE 2: the recorded Hausdorff of every level of the build's own chains (default options)
   against a dense ``--samples`` measurement with another seed (recorded/dense >= 1 when the

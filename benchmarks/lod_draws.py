@@ -14,14 +14,17 @@ far such a cell moves from draw to draw, and compares the medians.
 
 What it does. The models: the generated CAD-style and held-out ones (``benchmarks/cad_models.py``,
 ``benchmarks/unseen_models.py``: kinds the corpus does not hold, nothing tuned on them), and
-corpus folders named by ``--corpus``. Draw 0 is each file as written; draw k >= 1 the same file
-with the triangles of every primitive in another order (seed k; glTF: the index accessors
-permuted in place in the buffer, every other byte as it was; a .gltf in a copy of its folder; OBJ: the ``f`` lines of each
-run permuted), so the geometry, materials and attributes are identical. For each draw and ratio
-(1/2, 1/4, 1/8, 1/16), as in TABLE 1: gltfpack ``-si R -se 1 -sv -noq`` on the file, and ours
-the way the build makes levels (``build_model_lods`` with default options at gltfpack's
-triangle counts), both measured against the whole model with ``--samples`` area samples a side
-plus every vertex (``lod.Sampled``, a lower value of the true distance).
+corpus folders named by ``--corpus``. Draw 0 is each file as written; draw k >= 1 the same file,
+in a copy of its folder, with the triangles in another order (seed k): glTF, the triangles of
+every index accessor that only TRIANGLES primitives read, permuted in place in the buffer (every
+other byte as it was); OBJ, the faces of each group (``usemtl``/``g``/``o``/``s``) permuted, the
+vertex lines moved ahead of them in their order. The geometry, materials and attributes are
+identical. For each draw and ratio (1/2, 1/4, 1/8, 1/16), as in TABLE 1: gltfpack ``-si R -se 1
+-sv -noq`` on the file, and ours the way the build makes levels (``build_model_lods`` with
+default options at gltfpack's triangle counts), both measured against the whole model with
+``--samples`` area samples a side plus every vertex (``lod.Sampled``, a lower value of the true
+distance), one sample set made from draw 0 for every draw (the same surface): the draws differ
+by their levels, not by where the samples fell.
 
 Printed: per cell, gltfpack's and our Hausdorff distances over the draws (min, median, max, %
 of the diagonal), the ratio of the medians and draw 0's ratio; then the share of cells within
@@ -48,43 +51,80 @@ import lod  # noqa: E402  (this folder's TABLE 1 benchmark: its loaders and meas
 WITHIN = 1.1  # issue 11's goal: our Hausdorff within 1.1x gltfpack's
 
 
+#: OBJ statements that start a new group of faces (material, group, object, smoothing group):
+#: faces are permuted within a group, never across one
+_OBJ_GROUP = ("usemtl", "g", "o", "s")
+_OBJ_VERTEX = ("v", "vt", "vn")
+
+
 def permute_obj(src: Path, dst: Path, seed: int) -> None:
-    """``src`` with the ``f`` lines of each run of consecutive ``f`` lines in a random order."""
+    """``src`` with the faces of each group (between ``usemtl``/``g``/``o``/``s`` lines) in a
+    random order. Exporters often write a face's ``vt`` lines between faces; the ``v``, ``vt``
+    and ``vn`` lines are moved ahead of every face, in their order, so a face's positive indices
+    name the same vertices (a file with relative, negative indices keeps its layout and only
+    runs of consecutive faces are permuted)."""
     rng = np.random.default_rng(seed)
     lines = src.read_text().splitlines()
-    out, run = [], []
-    for line in lines + [""]:
-        if line.startswith("f "):
-            run.append(line)
+    words = [line.split(maxsplit=1)[0] if line.strip() else "" for line in lines]
+    relative = any(tok.startswith("-") for line, w in zip(lines, words) if w == "f"
+                   for tok in line.split()[1:])
+    if relative:
+        out, run = [], []
+        for line, w in zip(lines + [""], words + [""]):
+            if w == "f":
+                run.append(line)
+                continue
+            if run:
+                out.extend(run[i] for i in rng.permutation(len(run)))
+                run = []
+            out.append(line)
+        dst.write_text("\n".join(out[:-1]) + "\n")
+        return
+    vertices = [line for line, w in zip(lines, words) if w in _OBJ_VERTEX]
+    groups: list[tuple[list[str], list[str]]] = [([], [])]  # (other lines, faces) per group
+    for line, w in zip(lines, words):
+        if w in _OBJ_VERTEX:
             continue
-        if run:
-            out.extend(run[i] for i in rng.permutation(len(run)))
-            run = []
-        out.append(line)
-    dst.write_text("\n".join(out[:-1]) + "\n")
+        if w in _OBJ_GROUP:
+            groups.append(([], []))
+        groups[-1][1 if w == "f" else 0].append(line)
+    out = []
+    for k, (other, faces) in enumerate(groups):
+        out += other  # the first group's: the header (mtllib, comments), then every vertex
+        if k == 0:
+            out += vertices
+        out += [faces[i] for i in rng.permutation(len(faces))]
+    dst.write_text("\n".join(out) + "\n")
 
 
 def _permute_indices(doc: dict, buffers: list[bytearray], rng: np.random.Generator) -> None:
     """The triangles of every indexed TRIANGLES primitive of ``doc`` (glTF JSON) in a random
-    order, in place in ``buffers`` (the document's buffers' bytes)."""
+    order, in place in ``buffers`` (the document's buffers' bytes). An index accessor that a
+    non-TRIANGLES primitive also reads is left as it is; a sparse or compressed one (Draco,
+    meshopt) is refused (``ValueError``)."""
     dtypes = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32}
+    prims = [p for mesh in doc.get("meshes", []) for p in mesh.get("primitives", [])]
+    other = {p["indices"] for p in prims if p.get("indices") is not None and p.get("mode", 4) != 4}
     done = set()
-    for mesh in doc.get("meshes", []):
-        for prim in mesh.get("primitives", []):
-            a = prim.get("indices")
-            if a is None or prim.get("mode", 4) != 4 or a in done:
-                continue
-            done.add(a)
-            acc = doc["accessors"][a]
-            view = doc["bufferViews"][acc["bufferView"]]
-            dt = np.dtype(dtypes[acc["componentType"]])
-            if view.get("byteStride", dt.itemsize) != dt.itemsize:
-                raise ValueError("a strided index accessor")
-            start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-            n = (acc["count"] - acc["count"] % 3) * dt.itemsize
-            buf = buffers[view["buffer"]]
-            tri = np.frombuffer(bytes(buf[start:start + n]), dt).reshape(-1, 3)
-            buf[start:start + n] = tri[rng.permutation(len(tri))].tobytes()
+    for prim in prims:
+        a = prim.get("indices")
+        if a is None or prim.get("mode", 4) != 4 or a in done or a in other:
+            continue
+        done.add(a)
+        acc = doc["accessors"][a]
+        if "sparse" in acc or "bufferView" not in acc or "extensions" in prim:
+            raise ValueError(f"index accessor {a}: sparse, without a buffer view, or compressed")
+        view = doc["bufferViews"][acc["bufferView"]]
+        if "extensions" in view:
+            raise ValueError(f"index accessor {a}: its buffer view is compressed")
+        dt = np.dtype(dtypes[acc["componentType"]])
+        if view.get("byteStride", dt.itemsize) != dt.itemsize:
+            raise ValueError(f"index accessor {a}: strided")
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        n = (acc["count"] - acc["count"] % 3) * dt.itemsize
+        buf = buffers[view["buffer"]]
+        tri = np.frombuffer(bytes(buf[start:start + n]), dt).reshape(-1, 3)
+        buf[start:start + n] = tri[rng.permutation(len(tri))].tobytes()
 
 
 def permute_gltf(path: Path, seed: int) -> None:
@@ -100,7 +140,9 @@ def permute_gltf(path: Path, seed: int) -> None:
         json_len = struct.unpack_from("<I", data, 12)[0]
         doc = json.loads(bytes(data[20:20 + json_len]))
         bin_at = 20 + json_len
-        bin_len = struct.unpack_from("<I", data, bin_at)[0]
+        bin_len, kind = struct.unpack_from("<II", data, bin_at)
+        if kind != 0x004E4942 or any("uri" in b for b in doc.get("buffers", [])[:1]):
+            raise ValueError(f"{path}: no BIN chunk after the JSON chunk, or buffer 0 is not it")
         buffers = [bytearray(data[bin_at + 8:bin_at + 8 + bin_len])]
         _permute_indices(doc, buffers, rng)
         data[bin_at + 8:bin_at + 8 + bin_len] = buffers[0]
@@ -134,24 +176,33 @@ def draw_files(path: Path, draws: int, folder: Path) -> list[Path]:
     return out
 
 
-def measure_draw(exe: str, path: Path, samples: int, tmp: Path,
-                 extra: dict | None = None) -> list[tuple[int, float, int, float]]:
-    """Per ratio: (gltfpack's triangles, its Hausdorff %, our triangles, our Hausdorff %).
-    ``extra``: LodOptions fields set for ours besides TABLE 1's (``--set``)."""
+def reference(path: Path, samples: int):
+    """The whole model as the build sees it, sampled for measuring (``lod.Sampled``): made once
+    from draw 0 and used for every draw (the same geometry), so the draws differ by their
+    levels, not by where the samples fell."""
     build = lod.load_build_meshes(path)
     pos = np.concatenate([b.positions for b in build])
     offs = np.cumsum([0] + [len(b.positions) for b in build])
     idx = np.concatenate([b.indices.astype(np.int64) + o for b, o in zip(build, offs)])
-    dense = lod.Sampled(pos, idx, samples)
+    return lod.Sampled(pos, idx, samples)
+
+
+def measure_draw(exe: str, path: Path, dense, tmp: Path,
+                 extra: dict | None = None) -> list[tuple[int, float, int, float]]:
+    """Per ratio: (gltfpack's triangles, its Hausdorff %, our triangles, our Hausdorff %), both
+    measured by ``dense`` (:func:`reference`). ``extra``: LodOptions fields set for ours besides
+    TABLE 1's (``--set``)."""
+    build = lod.load_build_meshes(path)
+    m = sum(b.indices.shape[0] for b in build)
     gp = []
     for r in lod.RATIOS:
         res = lod.gltfpack_run(exe, path, r, tmp)
         if res is None:
             raise RuntimeError(f"gltfpack failed on {path} at {r}")
         gp.append((len(res[1]), 100 * dense.rel(res[0], res[1])))
-    ratios = (1.0, *[max(g / len(idx), 1e-9) for g, _ in gp])
+    ratios = (1.0, *[max(g / m, 1e-9) for g, _ in gp])
     opts = lod.LodOptions(ratios=ratios, min_triangles=1, max_error=None,
-                          error_samples=min(samples, lod.DEFAULT_LOD_OPTIONS.error_samples),
+                          error_samples=min(dense.n, lod.DEFAULT_LOD_OPTIONS.error_samples),
                           **(extra or {}))
     upos, levels = lod.union_levels(lod.build_model_lods(build, opts), len(ratios))
     return [(g, gh, len(lv), 100 * dense.rel(upos, lv)) for (g, gh), lv in zip(gp, levels[1:])]
@@ -205,8 +256,9 @@ def main() -> int:
     rows = []
     for name, path in models:
         per_draw = []
+        dense = reference(path, args.samples)
         for k, f in enumerate(draw_files(path, args.draws, tmp)):
-            per_draw.append(measure_draw(exe, f, args.samples, tmp, extra))
+            per_draw.append(measure_draw(exe, f, dense, tmp, extra))
             print(f"{name[:28]:28} draw {k}: " + "  ".join(
                 f"1/{round(1 / r)} gp {gh:.4f} ours {oh:.4f}" for r, (_, gh, _, oh) in zip(lod.RATIOS, per_draw[-1])),
                 flush=True)
