@@ -2,7 +2,7 @@
 orders of the same models.
 
 Run:  .venv/bin/python benchmarks/lod_draws.py [--draws 5] [--samples 1000000] [--corpus NAME,...]
-          [--no-generated] [--only WORD,...] [--set FIELD=VALUE ...]
+          [--no-generated] [--only WORD,...] [--set FIELD=VALUE ...] [--quick]
 
 Why: meshoptimizer (ours and gltfpack's) collapses greedily, and its largest error comes from a
 few collapses whose choice depends on ties and float32 rounding: the same mesh with its
@@ -215,10 +215,13 @@ def main() -> int:
     ap.add_argument("--corpus", help="comma-separated corpus folders to add (their first model file)")
     ap.add_argument("--no-generated", action="store_true", help="only the --corpus folders")
     ap.add_argument("--only", help="comma-separated words: only the models whose name holds one")
+    ap.add_argument("--quick", action="store_true", help="3 draws of 200,000 samples a side")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a LodOptions field for ours (repeatable), e.g. --set move_vertices=false")
     ap.add_argument("--out", type=Path, default=lod.RESULTS)
     args = ap.parse_args()
+    if args.quick:
+        args.draws, args.samples = min(args.draws, 3), min(args.samples, 200_000)
     extra = {}
     for item in args.set:
         field, sep, value = item.partition("=")
