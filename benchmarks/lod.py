@@ -266,6 +266,14 @@ def load_build_meshes(path: Path):
     return out
 
 
+def whole_model(parts) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (N, 3) float64, triangles (M, 3) int64) of :func:`load_build_meshes`' parts as
+    one mesh: the whole model every level is measured against."""
+    pos = np.concatenate([b.positions for b in parts])
+    offs = np.cumsum([0] + [len(b.positions) for b in parts])
+    return pos, np.concatenate([b.indices.astype(np.int64) + o for b, o in zip(parts, offs)])
+
+
 def union_levels(meshes, depth: int | None = None):
     """(all positions f64, level k of every output mesh concatenated, for each k).
 
@@ -397,9 +405,7 @@ def main() -> int:
                 emit(kind, r, len(out), dt, err)
         # --- as the build does it: the model's meshes (build_model_lods), against the whole model
         build = load_build_meshes(path)
-        bpos = np.concatenate([b.positions for b in build])
-        offs = np.cumsum([0] + [len(b.positions) for b in build])
-        bidx = np.concatenate([b.indices.astype(np.int64) + o for b, o in zip(build, offs)])
+        bpos, bidx = whole_model(build)
         bref = prepare_reference(bpos, bidx, samples=DEFAULT_LOD_OPTIONS.error_samples)
         dense = Sampled(bpos, bidx, args.samples)
         m_build = len(bidx)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -161,8 +162,6 @@ def permute_gltf(path: Path, seed: int) -> None:
 def draw_files(path: Path, draws: int, folder: Path) -> list[Path]:
     """Draw 0 (the file itself) and ``draws - 1`` permuted copies, each in a copy of the file's
     folder (so its .mtl, .bin and images are found as before)."""
-    import shutil
-
     out = [path]
     for k in range(1, draws):
         copy = folder / f"{path.stem}-d{k}"
@@ -176,23 +175,13 @@ def draw_files(path: Path, draws: int, folder: Path) -> list[Path]:
     return out
 
 
-def reference(path: Path, samples: int):
-    """The whole model as the build sees it, sampled for measuring (``lod.Sampled``): made once
-    from draw 0 and used for every draw (the same geometry), so the draws differ by their
-    levels, not by where the samples fell."""
-    build = lod.load_build_meshes(path)
-    pos = np.concatenate([b.positions for b in build])
-    offs = np.cumsum([0] + [len(b.positions) for b in build])
-    idx = np.concatenate([b.indices.astype(np.int64) + o for b, o in zip(build, offs)])
-    return lod.Sampled(pos, idx, samples)
-
-
-def measure_draw(exe: str, path: Path, dense, tmp: Path,
+def measure_draw(exe: str, path: Path, build, dense, tmp: Path,
                  extra: dict | None = None) -> list[tuple[int, float, int, float]]:
-    """Per ratio: (gltfpack's triangles, its Hausdorff %, our triangles, our Hausdorff %), both
-    measured by ``dense`` (:func:`reference`). ``extra``: LodOptions fields set for ours besides
-    TABLE 1's (``--set``)."""
-    build = lod.load_build_meshes(path)
+    """Per ratio: (gltfpack's triangles, its Hausdorff %, our triangles, our Hausdorff %).
+    ``build``: the draw's meshes as the build sees them (``lod.load_build_meshes``); ``dense``:
+    the ``lod.Sampled`` whole model of draw 0, which measures every draw (the same surface), so
+    the draws differ by their levels, not by where the samples fell. ``extra``: LodOptions
+    fields set for ours besides TABLE 1's (``--set``)."""
     m = sum(b.indices.shape[0] for b in build)
     gp = []
     for r in lod.RATIOS:
@@ -244,6 +233,13 @@ def main() -> int:
         print("gltfpack not found (scripts/setup.sh installs it): nothing to compare")
         return 1
     tmp = Path(tempfile.mkdtemp(prefix="loddraws-"))
+    try:
+        return _run(args, exe, extra, tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)  # the generated models and every draw's copy
+
+
+def _run(args, exe: str, extra: dict, tmp: Path) -> int:
     models = []
     if not args.no_generated:
         from cad_models import write_cad_models
@@ -259,9 +255,11 @@ def main() -> int:
     rows = []
     for name, path in models:
         per_draw = []
-        dense = reference(path, args.samples)
+        first = lod.load_build_meshes(path)
+        dense = lod.Sampled(*lod.whole_model(first), args.samples)
         for k, f in enumerate(draw_files(path, args.draws, tmp)):
-            per_draw.append(measure_draw(exe, f, dense, tmp, extra))
+            build = first if k == 0 else lod.load_build_meshes(f)
+            per_draw.append(measure_draw(exe, f, build, dense, tmp, extra))
             print(f"{name[:28]:28} draw {k}: " + "  ".join(
                 f"1/{round(1 / r)} gp {gh:.4f} ours {oh:.4f}" for r, (_, gh, _, oh) in zip(lod.RATIOS, per_draw[-1])),
                 flush=True)
