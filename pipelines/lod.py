@@ -327,6 +327,15 @@ def _unique(cands: list[_Candidate]) -> list[_Candidate]:
 ESTIMATE_SAMPLES = 8192
 
 
+def unmoved_rows(moved: np.ndarray, pos32: np.ndarray) -> np.ndarray:
+    """(N,) bool: the rows of a moved level's float32 positions ``moved`` (N, 3) that the
+    simplifier left as they were in level 0's ``pos32`` (N, 3) (meshoptimizer's
+    ``simplifyWithUpdate`` moves only the vertices collapses ended on: on CAD meshes about
+    half of a level's vertices at 1/2 stay). Such a row is level 0's vertex, and is written
+    and measured as exactly that."""
+    return np.all(moved == pos32, axis=1)
+
+
 class _Estimator:
     """A quick *sampled* two-sided Hausdorff distance to level 0, used only to choose among
     candidates (chained or direct, pruned, sloppy): ``n`` area samples a side, plus up to ``n``
@@ -340,9 +349,11 @@ class _Estimator:
     then shares), whose BVH (built on first use by either) is used instead."""
 
     def __init__(self, local: np.ndarray, idx: np.ndarray, n: int, seed: int,
-                 side=None, frame: tuple[np.ndarray, float] = (np.zeros(3), 1.0)) -> None:
+                 side=None, frame: tuple[np.ndarray, float] = (np.zeros(3), 1.0),
+                 pos32: np.ndarray | None = None) -> None:
         self.local, self.idx, self.n, self.seed = local, idx, n, seed
         self.frame = frame  # (centre, scale): the chain's local frame -> this one
+        self.pos32 = pos32  # (N, 3) float32: level 0 as the simplifiers get it (chain's frame)
         used = np.zeros(local.shape[0], bool)
         used[idx.reshape(-1)] = True
         self.used = used
@@ -357,12 +368,18 @@ class _Estimator:
 
     def positions(self, moved: np.ndarray | None) -> np.ndarray:
         """A candidate's vertex positions in this frame: level 0's, or its moved ones (float64;
-        the same array for the same ``moved``, so BVHs built over it are reused)."""
+        the same array for the same ``moved``, so BVHs built over it are reused). A row the
+        simplifier did not move (equal to ``pos32``'s) is level 0's row, bit for bit
+        (:func:`unmoved_rows`): the bound then shares it, and the triangles over such rows."""
         if moved is None:
             return self.local
         got = self._moved.get(id(moved))
         if got is None or got[0] is not moved:
-            got = (moved, (np.asarray(moved, np.float64) - self.frame[0]) / self.frame[1])
+            own = (np.asarray(moved, np.float64) - self.frame[0]) / self.frame[1]
+            if self.pos32 is not None:
+                keep = unmoved_rows(moved, self.pos32)
+                own[keep] = self.local[keep]
+            got = (moved, own)
             self._moved[id(moved)] = got
         return got[1]
 
@@ -524,7 +541,8 @@ def build_lod_chain(
         ref = prepare_reference(local, idx, samples=options.bound_samples_for(m0),
                                 seed=options.error_seed)
         est = _Estimator(ref.positions, ref.indices, min(options.samples_for(m0), ESTIMATE_SAMPLES),
-                         options.error_seed + 101, side=ref.side, frame=(ref.centre, ref.scale))
+                         options.error_seed + 101, side=ref.side, frame=(ref.centre, ref.scale),
+                         pos32=pos32)
     error_targets = options.error_targets()
     chained = options.chain in ("best", "chained") or options.simplifier == "fast-simplification"
     direct = options.chain in ("best", "direct") and options.simplifier != "fast-simplification"
@@ -606,9 +624,13 @@ def build_lod_chain(
     nan = math.nan
     unit = diag if diag > 0 and math.isfinite(diag) else 1.0
     for k, ((out, err, sloppy, src, moved), e) in enumerate(chosen[1:], start=1):
-        # a moved level's positions back in model units (float64; rows it does not use are
-        # level 0's)
-        own = None if moved is None else np.asarray(moved, np.float64) * unit + centre
+        # a moved level's positions back in model units (float64; rows it did not move, and
+        # rows it does not use, are level 0's, bit for bit)
+        own = None
+        if moved is not None:
+            own = np.asarray(moved, np.float64) * unit + centre
+            keep = unmoved_rows(moved, pos32)
+            own[keep] = pos[keep]
         if e is None:
             levels.append(LodLevel(k, out, int(out.shape[0]), err, nan, nan, nan, nan, nan, sloppy, src,
                                    positions=own))

@@ -508,9 +508,11 @@ def _triangle_keys(tri: np.ndarray, n: int) -> np.ndarray:
 
 
 def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.ndarray,
-               tolerance: float, work: int, lower: float = 0.0) -> tuple[_Direction, float]:
+               tolerance: float, work: int, lower: float = 0.0,
+               same: np.ndarray | None = None) -> tuple[_Direction, float]:
     """Bound src -> dst. ``shared`` (N,) bool: vertices of src that are corners of dst (both
-    index one vertex array), or None. Returns the bound and the samples' mean square."""
+    index one vertex array: row i of src is row i of dst wherever ``same`` (N,) bool says so,
+    everywhere when it is None), or None. Returns the bound and the samples' mean square."""
     n = src.positions.shape[0]
     tri = src.tri
     used = _used_mask(tri, n)
@@ -522,12 +524,16 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
         vf = _vertex_face(dst.tri, n)
         ask &= ~shared
         f_vert[used & shared] = vf[used & shared]
-        # a triangle that dst has too (same three vertices) is 0 away everywhere
-        dst_keys = np.sort(_triangle_keys(dst.tri, n))
-        keys = _triangle_keys(tri, n)
-        pos = np.searchsorted(dst_keys, keys)
-        pos = np.minimum(pos, dst_keys.shape[0] - 1)
-        tri = tri[dst_keys[pos] != keys]
+        # a triangle that dst has too (same three vertices, at the same places) is 0 away
+        # everywhere
+        dst_tri = dst.tri if same is None else dst.tri[same[dst.tri].all(axis=1)]
+        if dst_tri.shape[0]:
+            dst_keys = np.sort(_triangle_keys(dst_tri, n))
+            keys = _triangle_keys(tri, n)
+            pos = np.searchsorted(dst_keys, keys)
+            pos = np.minimum(pos, dst_keys.shape[0] - 1)
+            tri = tri[(dst_keys[pos] != keys) if same is None else
+                      (dst_keys[pos] != keys) | ~same[tri].all(axis=1)]
     qi = np.flatnonzero(ask)
     pts = np.concatenate([src.positions[qi], samples])
     dq, fq = dst.engine.query(pts)
@@ -543,39 +549,44 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
     return res, mean_sq
 
 
-def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, bool]],
+def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]],
              work_per_triangle: float | None = None,
              lower: Sequence[float | None] | None = None,
              engines: Sequence[_Engine | None] | None = None, threads: int = 1) -> list[SurfaceError]:
-    """meshes: (local positions, (M, 3) int64 indices, shares ref's vertices). ``threads``: the
+    """meshes: (local positions (N, 3), (M, 3) int64 indices, None or (N,) bool: the rows equal
+    to ref's rows (its vertex array then has ref's rows, some of them moved)). ``threads``: the
     meshes measured at once, at most (each is independent of the others: the same results)."""
     if work_per_triangle is None:
         work_per_triangle = DEFAULT_WORK_PER_TRIANGLE
     ref_empty = ref.indices.shape[0] == 0
 
     def one(i: int) -> SurfaceError:
-        local, tri, shared = meshes[i]
+        local, tri, same = meshes[i]
         if tri.shape[0] == 0 or ref_empty:
             return ZERO_ERROR if (tri.shape[0] == 0 and ref_empty) else _INF_ERROR
-        if not shared:
+        shared = same is not None
+        if same is not None and same.all():
+            same = None  # every row is ref's: the reference's own vertex array
+        if same is not None or not shared:
             _check_finite(local, tri, "measured mesh")
         # a level over the reference's own vertices shares its welding (np.unique of the rows:
         # 40 ms for the bunny's 35k vertices, once per chain instead of once per level)
         side = _Side(local, tri, _engine=engines[i] if engines is not None else None,
-                     _weld=ref.side.weld if shared else None)
+                     _weld=ref.side.weld if shared and same is None else None)
         used = _used_mask(tri, local.shape[0])
         # reference -> mesh: what the simplification lost
         work = int(min(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]),
                        DEFAULT_WORK_MAX))
         known = lower[i] if lower is not None else None
         known = float(known) if known is not None and math.isfinite(known) else 0.0
-        fwd, f_ms = _direction(ref.side, side, used if shared else None, ref.samples,
-                               ref.tolerance, work, known)
+        fwd, f_ms = _direction(ref.side, side, (used if same is None else used & same) if shared
+                               else None, ref.samples, ref.tolerance, work, known, same)
         # mesh -> reference: what it added
         s = sample_surface(local, tri, ref.n_samples, ref.seed + 1)
         # (the forward direction's lower value settles what cannot exceed it by the tolerance)
-        bwd, b_ms = _direction(side, ref.side, ref.vertex_used if shared else None, s,
-                               ref.tolerance, work, max(fwd.lower, known))
+        bwd, b_ms = _direction(side, ref.side, (ref.vertex_used if same is None else
+                                                ref.vertex_used & same) if shared else None, s,
+                               ref.tolerance, work, max(fwd.lower, known), same)
         h = max(fwd.upper, bwd.upper)
         lo = max(fwd.lower, bwd.lower, known)
         r = math.sqrt(0.5 * (f_ms + b_ms))
@@ -606,7 +617,7 @@ def measure_against(
     prepared = []
     for pos, idx in meshes:
         local = (np.asarray(pos, dtype=np.float64).reshape(-1, 3) - ref.centre) / ref.scale
-        prepared.append((local, np.ascontiguousarray(np.asarray(idx).reshape(-1, 3), dtype=np.int64), False))
+        prepared.append((local, np.ascontiguousarray(np.asarray(idx).reshape(-1, 3), dtype=np.int64), None))
     return _measure(ref, prepared)
 
 
@@ -624,15 +635,24 @@ def measure_levels(ref: Reference, levels: Sequence[np.ndarray],
     reference (or None), which starts its bound. ``engines``: per level, None or a BVH
     already built over that level's positions and triangles (``_Engine``), reused.
     ``positions``: per level, None (the reference's positions) or its own (N, 3) float64
-    positions in the reference's local frame (a level whose vertices moved): it is then
-    measured as a separate mesh, nothing assumed shared. ``threads``: levels measured at once,
+    positions in the reference's local frame (a level whose vertices moved): only its rows
+    equal to the reference's (bit for bit), and the triangles over them alone, are then
+    shared; the rest is measured as a separate mesh. ``threads``: levels measured at once,
     at most (the results do not depend on it).
     """
     prepared = []
     for i, l in enumerate(levels):
         own = positions[i] if positions is not None else None
         tri = np.ascontiguousarray(np.asarray(l).reshape(-1, 3), dtype=np.int64)
-        prepared.append((ref.positions, tri, True) if own is None else (own, tri, False))
+        if own is None:
+            prepared.append((ref.positions, tri, np.ones(ref.positions.shape[0], bool)))
+        else:
+            # a moved level keeps the rows it did not move (level 0's, bit for bit): those rows'
+            # vertices and the triangles over them only are shared
+            own = np.asarray(own, np.float64)
+            same = np.all(own == ref.positions, axis=1) if own.shape == ref.positions.shape \
+                else None
+            prepared.append((own, tri, same if same is not None and same.any() else None))
     return _measure(ref, prepared, lower=lower, engines=engines, threads=threads)
 
 

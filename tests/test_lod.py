@@ -512,3 +512,30 @@ def test_cad_shapes_get_converged_bounds(name, mesh, move):
     assert [lv.converged for lv in chain.levels[1:]] == [True] * (len(chain.levels) - 1), name
     if not move:  # levels in place on flat faces: the surface is unchanged
         assert max(lv.hausdorff_rel for lv in chain.levels[1:]) <= 2 * 2.0 ** -23
+
+
+def test_a_moved_levels_unmoved_rows_are_level_0s_bit_for_bit():
+    """meshoptimizer's simplifyWithUpdate moves only the vertices collapses end on; the rows it
+    leaves are level 0's positions exactly (not their float32 roundings in the chain's frame),
+    so the output writes them as LOD0 writes them and the bound shares them. A bumpy open
+    sheet's moved levels keep its border vertices (open borders stay put)."""
+    n = 40
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
+    z = 0.05 * np.sin(7 * x) * np.cos(5 * y)
+    pos = np.stack([x, y, z], -1).reshape(-1, 3) * 1.7 + [12.5, -3.25, 0.1]
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    tri = np.concatenate([np.stack([a, a + n + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + 1], 1)])
+    chain = build_lod_chain(pos, tri.astype(np.uint32), options=LodOptions(move_vertices=True))
+    moved = [lv for lv in chain.levels[1:] if lv.positions is not None]
+    assert moved
+    for lv in moved:
+        used = np.unique(lv.indices.reshape(-1))
+        same = np.all(lv.positions[used] == pos[used], axis=1)
+        assert 0 < same.sum() < used.size
+        # the border vertices (locked: never moved) among them, every one
+        border = used[(x.ravel()[used] % 1 == 0) | (y.ravel()[used] % 1 == 0)]
+        assert border.size and np.array_equal(lv.positions[border], pos[border])
+    # the rows it does not use are level 0's too
+    unused = np.setdiff1d(np.arange(pos.shape[0]), np.unique(moved[0].indices.reshape(-1)))
+    assert np.array_equal(moved[0].positions[unused], pos[unused])

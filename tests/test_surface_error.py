@@ -121,6 +121,36 @@ def test_shared_vertex_levels_match_general_path():
     assert fast.rms == pytest.approx(slow.rms, rel=1e-12)  # same samples, exact distances
 
 
+def test_a_partly_moved_level_shares_only_its_unmoved_rows():
+    """A level with its own positions (a moved level) whose rows are the reference's except a
+    few moved ones: only the unmoved rows, and the triangles over them alone, are shared. Its
+    bound is a bound of the dense-sample value, within the tolerance of what it evaluated,
+    and agrees with the same level measured as a separate mesh (nothing shared). Moving a
+    vertex of a triangle the reference has too must count: that triangle is not 0 away."""
+    pos, tri = _grid(12, z=lambda x, y: 0.1 * np.sin(6 * x + 2 * y))
+    sub = tri[::2]
+    ref = prepare_reference(pos, tri, samples=3000)
+    own = ref.positions.copy()
+    moved = np.unique(sub[::5].reshape(-1))
+    own[moved, 2] += 0.02  # moved off the surface: 0.02 of the grid's side (local frame)
+    model = own * ref.scale + ref.centre
+    shared = measure_levels(ref, [sub], positions=[own])[0]
+    apart = measure_error(pos, tri, model, sub, samples=3000)
+    dense = _dense(pos, tri, model, sub, 100_000)
+    for e in (shared, apart):
+        assert e.hausdorff >= dense
+        assert e.hausdorff <= (1 + DEFAULT_TOLERANCE) * e.hausdorff_lower
+    assert shared.hausdorff == pytest.approx(apart.hausdorff, rel=DEFAULT_TOLERANCE)
+    # every row moved by 0 (bit for bit the reference's): the in-place measurement
+    assert measure_levels(ref, [sub], positions=[ref.positions.copy()])[0] == measure_levels(ref, [sub])[0]
+    # one vertex of a shared triangle moved: the bound sees it (it would be 0 if the triangle
+    # counted as shared)
+    one = ref.positions.copy()
+    one[sub[0, 0], 2] += 0.05
+    e = measure_levels(ref, [sub], positions=[one])[0]
+    assert e.hausdorff >= _dense(pos, tri, one * ref.scale + ref.centre, sub, 100_000) > 0.01 * ref.diagonal
+
+
 def test_known_lower_value_seeds_the_bound():
     """A distance already evaluated between the level and the reference (the LOD estimator's)
     starts the bound: it is still a bound of the dense-sample value, it reports the seed as
