@@ -33,6 +33,7 @@ from pathlib import Path
 
 from assetpipe.core.errors import CacheError
 from assetpipe.core.hashing import PREFIX, canonical_json, digest_bytes
+from assetpipe.core.writer import write_all
 
 ENV_VAR = "ASSETPIPE_CACHE"
 BLOB_MODE = 0o444  # blobs are never written in place: read-only, for every output linked to them
@@ -185,7 +186,7 @@ class Store:
 
                 fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
                 with os.fdopen(fd, "wb") as f:
-                    f.write(data)
+                    write_all(f, data)
                 if mode is not None:
                     os.chmod(tmp, mode)
                 os.replace(tmp, path)
@@ -326,7 +327,7 @@ class Store:
             except FileExistsError:  # left by a killed process that had this pid
                 continue
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            write_all(f, data)
         os.replace(tmp, path)
 
     def end_build(self, session, out_dir: Path | None = None, seconds: float = 0.0) -> None:

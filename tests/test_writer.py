@@ -6,10 +6,11 @@ import os
 import stat
 import time
 
+import numpy as np
 import pytest
 
 from assetpipe.core import writer
-from assetpipe.core.writer import STATE_DIR, sweep_tmp, tmp_dir, write_atomic
+from assetpipe.core.writer import WRITE_CHUNK, STATE_DIR, sweep_tmp, tmp_dir, write_all, write_atomic
 
 
 def test_write_creates_folders_and_leaves_no_temporary(tmp_path):
@@ -104,3 +105,15 @@ def test_sweep_survives_a_subfolder(tmp_path):
     os.utime(t / "f", (0, 0))
     sweep_tmp(tmp_path)
     assert [p.name for p in t.iterdir()] == ["dir"]
+
+
+@pytest.mark.parametrize("size", [0, 1, WRITE_CHUNK - 1, WRITE_CHUNK, 3 * WRITE_CHUNK + 17])
+def test_write_all_writes_every_byte_in_order(tmp_path, size):
+    """Slices of WRITE_CHUNK bytes, the last one short: the file holds the bytes as given, for
+    bytes, a bytearray and a numpy array alike (what write_atomic and the store hand it)."""
+    data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+    for i, given in enumerate((data.tobytes(), bytearray(data.tobytes()), data)):
+        path = tmp_path / f"{i}.bin"
+        with open(path, "wb") as f:
+            write_all(f, given)
+        assert path.read_bytes() == data.tobytes()
