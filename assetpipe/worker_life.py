@@ -16,6 +16,7 @@ the next build sweeps.
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import threading
@@ -53,6 +54,10 @@ def init_worker(parent_pid: int, spare=None) -> None:
     if os.getppid() != parent_pid:  # the parent died before prctl took effect
         os._exit(1)
     threading.Thread(target=_watch_parent, args=(parent_pid,), name="assetpipe-parent-watch", daemon=True).start()
+    # what the worker inherited (modules, the loaded kernels) lives as long as it does: the cyclic
+    # collector leaves it alone from now on instead of walking it at every full collection (and
+    # writing to its pages, which copies them from the parent); reference counting still frees
+    gc.freeze()
 
 
 #: glibc malloc: blocks up to this size come from the heap, not a fresh mmap each (M_MMAP_THRESHOLD)
