@@ -574,19 +574,20 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, np.ndarr
         side = _Side(local, tri, _engine=engines[i] if engines is not None else None,
                      _weld=ref.side.weld if shared and same is None else None)
         used = _used_mask(tri, local.shape[0])
-        # reference -> mesh: what the simplification lost
         work = int(min(DEFAULT_WORK_MIN + work_per_triangle * (ref.indices.shape[0] + tri.shape[0]),
                        DEFAULT_WORK_MAX))
         known = lower[i] if lower is not None else None
         known = float(known) if known is not None and math.isfinite(known) else 0.0
-        fwd, f_ms = _direction(ref.side, side, (used if same is None else used & same) if shared
-                               else None, ref.samples, ref.tolerance, work, known, same)
-        # mesh -> reference: what it added
+        # mesh -> reference (what it added) first: it has the fewer cells (the level's), and its
+        # lower value then settles more of the reference's cells in the other direction, which
+        # has the most (the cells that cannot exceed it by the tolerance)
         s = sample_surface(local, tri, ref.n_samples, ref.seed + 1)
-        # (the forward direction's lower value settles what cannot exceed it by the tolerance)
         bwd, b_ms = _direction(side, ref.side, (ref.vertex_used if same is None else
                                                 ref.vertex_used & same) if shared else None, s,
-                               ref.tolerance, work, max(fwd.lower, known), same)
+                               ref.tolerance, work, known, same)
+        # reference -> mesh: what the simplification lost
+        fwd, f_ms = _direction(ref.side, side, (used if same is None else used & same) if shared
+                               else None, ref.samples, ref.tolerance, work, max(bwd.lower, known), same)
         h = max(fwd.upper, bwd.upper)
         lo = max(fwd.lower, bwd.lower, known)
         r = math.sqrt(0.5 * (f_ms + b_ms))
