@@ -174,6 +174,43 @@ def test_a_model_is_encoded_and_written_as_soon_as_its_own_steps_are_done(tmp_pa
     assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out2")
 
 
+class _InlineTwo(_Recording):
+    """Runs each task where it is handed out (as one job does), but tells the graph it has two
+    workers: the graph then streams as it does with a pool, and each task it hands out has
+    finished by the time it looks (a pool whose workers are always done first)."""
+
+    def __init__(self, jobs):
+        super().__init__(1)
+        self.jobs = 2
+
+
+def test_with_workers_a_models_outputs_wait_for_the_tasks_it_freed(tmp_path, monkeypatch):
+    """With a pool, writing a finished model's outputs (this process's work, a copy of each of
+    its textures) comes after handing out the tasks there are and taking the ones that finished:
+    with workers that are always done first, every model is written once no task is left. The
+    outputs are byte-identical to a build with one job, which writes each model at once."""
+    from assetpipe.build import run_build
+    from assetpipe.options import BuildOptions
+
+    src = tmp_path / "src"
+    _textured_models(src)
+    _Recording.calls = []
+    monkeypatch.setattr(graph, "Executor", _InlineTwo)
+    monkeypatch.setattr(graph, "STREAM_QUEUED_SECONDS", 0.0)  # three tasks out at a time
+    reported: list[tuple[str, int]] = []
+
+    def on_result(r, done, total):
+        reported.append((Path(r.source).stem, len(_Recording.calls)))
+
+    run_build([src], tmp_path / "out", BuildOptions(), jobs=2, cache_dir=tmp_path / "cache", on_result=on_result)
+    calls = len(_Recording.calls)
+    assert sorted(n for n, _ in reported) == ["a_small", "b_large", "c_medium"]
+    assert all(n == calls for _, n in reported), (reported, calls)
+    monkeypatch.undo()
+    run_build([src], tmp_path / "out1", BuildOptions(), jobs=1, cache_dir=tmp_path / "cache1")
+    assert output_bytes(tmp_path / "out") == output_bytes(tmp_path / "out1")
+
+
 # -- a worker killed by one model's step (a native crash) fails that model alone ------------
 
 _CRASH_ON = Path("/nonexistent")  # set by the test: a file holding the blob whose step kills its worker
