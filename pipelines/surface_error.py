@@ -578,9 +578,9 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, np.ndarr
                        DEFAULT_WORK_MAX))
         known = lower[i] if lower is not None else None
         known = float(known) if known is not None and math.isfinite(known) else 0.0
-        # mesh -> reference (what it added) first: it has the fewer cells (the level's), and its
-        # lower value then settles more of the reference's cells in the other direction, which
-        # has the most (the cells that cannot exceed it by the tolerance)
+        # mesh -> reference (what it added) first: for a level it has the fewer cells, and its
+        # lower value then settles more of the reference's cells in the other direction (the
+        # cells that cannot exceed it by the tolerance), which has a cell per reference triangle
         s = sample_surface(local, tri, ref.n_samples, ref.seed + 1)
         bwd, b_ms = _direction(side, ref.side, (ref.vertex_used if same is None else
                                                 ref.vertex_used & same) if shared else None, s,
