@@ -13,7 +13,10 @@ process's (``time.process_time``).
    simplifications (meshoptimizer's WASM ``simplifyWithUpdate`` separately) and the balance
    curves, each timed by wrapping it; then the recorded bounds split by direction (level 0 ->
    level, level -> level 0) and level size: CPU, first-pass cells (the source side's
-   triangles) and engine queries.
+   triangles) and engine queries; the bound's stages (the cells each is given, the cells it
+   settles, its CPU; the height field's cells by why it gave up, ``patch_bound.WHY_*``); and
+   the ten most expensive directions one by one (level 0's and the level's triangles, whether
+   the level's vertices moved, its bound and the largest distance it evaluated).
 2. With ``--models`` (the default), each model file built cold alone: its CPU against
    ``gltfpack -si 0.5`` on the same file (CPU of the process, its start-up included: what the
    cold-build benchmark runs), largest first.
@@ -31,6 +34,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -103,6 +108,28 @@ ORDER = ("recorded bounds (measure_levels)", "candidates' estimates", "candidate
          "  of them meshoptimizer's WASM (moved)", "balance curves")
 
 
+#: the height field's reasons, in the order of ``pipelines.patch_bound.WHY_*``
+WHY = ("bounded", "skipped", "too many", "uncovered", "border", "non-manifold", "folded")
+
+
+def _stage_tallies(timer: Timer, surface_error) -> None:
+    """Time the bound's stages where ``_bound_direction`` calls them (``surface_error``'s
+    namespace): per stage the cells given, the ones it settles (bound <= the threshold it was
+    given) and, for the height field, why it gave up on the others."""
+    def settled(ub, thr) -> dict:
+        return {"cells": int(ub.shape[0]), "settled": int((ub <= thr).sum())}
+
+    timer.wrap(surface_error, "near_bounds", "near bounds (Lipschitz, convexity, pair)",
+               tally=lambda r, v, d, f, hint, thr, *a: settled(r[0], thr))
+    timer.wrap(surface_error, "patch_bound", "height field",
+               tally=lambda r, v, rho, *a: {**settled(r[0], rho[0] if rho.size else 0.0),
+                                            **dict(zip(WHY, np.bincount(r[1], minlength=len(WHY)).tolist()))})
+    timer.wrap(surface_error, "pair_bound", "pair bound (after the centroid query)",
+               tally=lambda r, *a: settled(r, a[-1]))
+    timer.wrap(surface_error._Engine, "query", "engine queries (first pass and splits)",
+               tally=lambda r, engine, points, *a, **k: {"cells": int(points.shape[0])})
+
+
 def breakdown(inputs: list[str]) -> None:
     from assetpipe import steps
     from assetpipe.pipelines import lod, lod_model, meshopt_wasm, surface_error
@@ -110,7 +137,22 @@ def breakdown(inputs: list[str]) -> None:
     by_step = Timer()
     inner = Timer()
     directions = Timer()
+    stages = Timer()
     directions.wrap(surface_error, "_direction", _direction_label, _direction_tally)
+    _stage_tallies(stages, surface_error)
+    # per direction: (CPU s, source's triangles, target's triangles, moved, bound, largest evaluated)
+    each: list[tuple] = []
+    timed_direction = surface_error._direction
+
+    def one_direction(src, dst, *args, **kwargs):
+        t = time.process_time()
+        res = timed_direction(src, dst, *args, **kwargs)
+        moved = (args[5] if len(args) > 5 else kwargs.get("same")) is not None  # _direction(src, dst, shared, samples, tolerance, work, lower, same)
+        each.append((time.process_time() - t, src.tri.shape[0], dst.tri.shape[0], moved,
+                     res[0].upper, res[0].lower))
+        return res
+
+    surface_error._direction = one_direction
     lod_model.LOD_THREADS = 1  # one thread: the wrapped parts' CPU adds up to the step's
     for (owner, name), label in zip([(lod, "measure_levels"), (lod._Estimator, "__call__"),
                                      (lod, "_candidates"), (meshopt_wasm, "simplify_with_update"),
@@ -119,7 +161,7 @@ def breakdown(inputs: list[str]) -> None:
     with tempfile.TemporaryDirectory() as d:
         _build([str(REPO / "examples")], f"{d}/warm")
         # the wrapped parts count from here (the warm-up build's LOD steps ran through them too)
-        inner.clear(), directions.clear()
+        inner.clear(), directions.clear(), stages.clear(), each.clear()
         real_call = by_step.wrap(steps, "call_task", label=lambda fn, *args: fn.__name__)
         try:
             t = time.process_time()
@@ -139,6 +181,17 @@ def breakdown(inputs: list[str]) -> None:
         c = directions.counts[(name, k)]
         print(f"    {name:18s} 1/{2 ** k:<4d} {directions.seconds[(name, k)]:7.2f} s  "
               f"{c['cells']:9d} first-pass cells  {c['queries']:9d} queries")
+    print("  the bound's stages (cells given, cells settled; the height field's others by why it gave up):")
+    for name in sorted(stages.seconds, key=lambda n: -stages.seconds[n]):
+        c = stages.counts[name]
+        why = ", ".join(f"{w} {c[w]}" for w in WHY[1:] if c.get(w))
+        print(f"    {name:40s} {stages.seconds[name]:7.2f} s  {c['cells']:9d} cells"
+              + (f"  {c['settled']:9d} settled" if "settled" in c else "") + (f"  ({why})" if why else ""))
+    print("  the ten most expensive directions (bounds in fractions of level 0's diagonal):")
+    for sec, n_src, n_dst, moved, upper, low in sorted(each, reverse=True)[:10]:
+        way = "level 0 -> level" if n_src >= n_dst else "level -> level 0"
+        print(f"    {sec:6.2f} s  {way}  level 0 {max(n_src, n_dst):7d} triangles, level {min(n_src, n_dst):7d}"
+              f"{' (moved)' if moved else '        '}  bound {upper:.3g}, largest evaluated {low:.3g}")
 
 
 def per_model(inputs: list[str], gltfpack: str | None) -> None:
