@@ -199,3 +199,52 @@ def test_side_value_shortcuts_agree_with_the_full_tests():
                 assert _clip(fx, fy, tx, ty, ox, oy, bx, by) == 3
                 assert (ox[:3] == fx).all() and (oy[:3] == fy).all()
     assert min(counts.values()) > 500, counts  # each case was met
+
+
+def test_a_second_sheet_with_a_border_over_the_cell_is_left_out():
+    """A washer lying on a plate (CAD parts touch): its open rim reaches into the cell, so the
+    washer's component is left out and the plate alone proves the cover. Without the plate
+    under the rim (the plate holed there) the cell is still given up."""
+    rng = np.random.default_rng(5)
+    pos, tri = _grid(9, lambda x, y: 0 * x)
+    # the washer: a small square sheet 0.004 above the plate, facing up, sharing no vertex
+    wpos, wtri_ = _grid(3, lambda x, y: 0 * x + 0.004, 0.4, 0.6)
+    allpos = np.concatenate([pos, wpos])
+    alltri = np.concatenate([tri, wtri_ + pos.shape[0]])
+    cell = np.array([[[0.2, 0.2, 0.01], [0.8, 0.2, 0.01], [0.5, 0.8, 0.01]]])
+    val, why = _bound(allpos, alltri, cell, 0.1)
+    assert why[0] == WHY_BOUNDED
+    # the plate's height (the washer is nearer where it lies: the bound holds, it is not tight)
+    assert 0.01 <= val[0] < 0.01 * (1 + 1e-6)
+    assert val[0] >= _dense_max(cell[0], allpos, alltri, rng)
+    # the plate holed under the cell's middle: both components have a border over the cell
+    centre = pos[tri].mean(axis=1)
+    hole = np.argmin(np.linalg.norm(centre[:, :2] - [0.5, 0.3], axis=1))
+    holed = np.concatenate([np.delete(tri, hole, axis=0), wtri_ + pos.shape[0]])
+    val, why = _bound(allpos, holed, cell, 0.1)
+    assert why[0] == WHY_BORDER and val[0] == np.inf
+
+
+def test_steep_walls_under_the_cell_never_below_the_truth():
+    """A ratchet: teeth rising gently to 0.08 and dropping over 1e-4 (walls nearly edge-on to the
+    cells), over cells 0.03 below: the walls' and the tops' heights exceed the threshold, so
+    their exact distances at the clipped corners are taken where smaller. Every value holds,
+    and is below the vertical height of the tops."""
+    rng = np.random.default_rng(6)
+    xs = np.sort(np.concatenate([np.linspace(0.0, 1.0, 9), np.linspace(0.0, 1.0, 9)[1:-1] + 1e-4]))
+    ys = np.linspace(0.0, 1.0, 9)
+    x, y = np.meshgrid(xs, ys)
+    z = np.where(np.isclose(x * 8, np.round(x * 8), rtol=0, atol=1e-9) & (x > 0), 0.08, 0.0)  # tops, then the walls
+    pos = np.stack([x.ravel(), y.ravel(), z.ravel()], 1)
+    i = np.arange(x.size).reshape(x.shape)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    tri = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    cpos, ctri = _grid(5, lambda x, y: 0 * x - 0.03, 0.05, 0.95)
+    cells = cpos[ctri]
+    val, why = _bound(pos, tri, cells, 0.1)
+    assert (why == WHY_BOUNDED).all()
+    for k in range(cells.shape[0]):
+        assert val[k] >= _dense_max(cells[k], pos, tri, rng, 2000), k
+    # every cell lies under a tooth's top, 0.11 above it: what the vertical heights alone give
+    # (measured 0.86-0.91x of that with the exact distances)
+    assert (val < 0.11).all(), val.max()
