@@ -38,9 +38,10 @@ two triangles of S) is left out, and the proof is made for the rest: each of its
 into T has both triangles in the rest (they share a component), so the rest is a sheet as
 above. (CAD parts lie on one another: a washer's open rim over a plate's face made the plate's
 cells fail.) A non-manifold edge reaching into T still fails the cell. Hence ``c`` (of the
-sheet kept) is one constant ``k`` on T shrunk by ``m``, the clipped areas of its triangles sum to
-about ``k * area(T)``, and ``k >= 1`` when that sum is at least half of T's area (the strip within ``m`` of the border holds at most a quarter of it,
-counted once per triangle: cells thinner than that, inradius <= 8 PATCH_MAX m, are skipped).
+sheet kept) is one constant ``k`` on T shrunk by ``m``, the clipped areas of its triangles sum
+to about ``k * area(T)``, and ``k >= 1`` when that sum is at least half of T's area (the strip
+within ``m`` of the border holds at most a quarter of it, counted once per triangle: cells
+thinner than that, inradius <= 8 PATCH_MAX m, are skipped).
 A point of T within ``m`` of its border (where edges reaching less
 than ``m`` in were not checked) is within ``m * size / inradius`` of a covered point, and the
 distance is 1-Lipschitz: that much is added. Anything else (a non-manifold edge over T, no
@@ -429,7 +430,8 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
                 # (back in the target's frame; d(., F) is convex), where smaller
                 ze = 0.0
                 for q in range(mc):
-                    ze = max(ze, _dist2(p0x + ox[q] * e1x + oy[q] * e2x, p0y + ox[q] * e1y + oy[q] * e2y,
+                    ze = max(ze, _dist2(p0x + ox[q] * e1x + oy[q] * e2x,
+                                        p0y + ox[q] * e1y + oy[q] * e2y,
                                         p0z + ox[q] * e1z + oy[q] * e2z, a, b, c, f))
                 zmax[j] = min(zmax[j], np.sqrt(ze) * (1.0 + _UP_REL) + _UP_ABS)
         # the patch S: the triangles reaching into T that face the way most of the projected

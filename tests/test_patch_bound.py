@@ -234,7 +234,8 @@ def test_steep_walls_under_the_cell_never_below_the_truth():
     xs = np.sort(np.concatenate([np.linspace(0.0, 1.0, 9), np.linspace(0.0, 1.0, 9)[1:-1] + 1e-4]))
     ys = np.linspace(0.0, 1.0, 9)
     x, y = np.meshgrid(xs, ys)
-    z = np.where(np.isclose(x * 8, np.round(x * 8), rtol=0, atol=1e-9) & (x > 0), 0.08, 0.0)  # tops, then the walls
+    # each tooth's top at x = k/8, its wall down to 0 at k/8 + 1e-4
+    z = np.where(np.isclose(x * 8, np.round(x * 8), rtol=0, atol=1e-9) & (x > 0), 0.08, 0.0)
     pos = np.stack([x.ravel(), y.ravel(), z.ravel()], 1)
     i = np.arange(x.size).reshape(x.shape)
     a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
