@@ -42,12 +42,23 @@ sheet kept) is one constant ``k`` on T shrunk by ``m``, the clipped areas of its
 to about ``k * area(T)``, and ``k >= 1`` when that sum is at least half of T's area (the strip
 within ``m`` of the border holds at most a quarter of it, counted once per triangle: cells
 thinner than that, inradius <= 8 PATCH_MAX m, are skipped).
-A point of T within ``m`` of its border (where edges reaching less
-than ``m`` in were not checked) is within ``m * size / inradius`` of a covered point, and the
-distance is 1-Lipschitz: that much is added. Anything else (a non-manifold edge over T, no
-sheet left covering it (the reason then: the last border or fold left out), too many
-triangles, a sliver cell) returns ``inf`` with the reason (``WHY_*``): the caller's other
-bounds and subdivision take the cell, as before.
+
+Borders kept. A border edge E over T is kept instead, with its piece, when the part of T on
+the side of E's line away from E's triangle is near E: its largest distance ``h_E`` to E (at
+that convex polygon's corners) is at most ``rho``. (An in-place level's chord cuts over a
+hole's rim: a sliver of the cell lies beyond the rim.) Then ``c`` changes across the borders
+kept, by one, and nowhere else; the area test still gives a covered point q of T shrunk by
+``m``. For a point p there that is not covered, walk from p to q: where ``c`` first rises, the
+walk enters a border's triangle, so p lies on the side of that border's line away from its
+triangle, and ``d(p) <= d(p, E) <= h_E`` (E is part of the target). The value returned is at
+least every such ``h_E``.
+
+A point of T within ``m`` of its border (where edges reaching less than ``m`` in were not
+checked) is within ``m * size / inradius`` of a point of T shrunk by ``m``, and the distance is
+1-Lipschitz: that much is added. Anything else (a non-manifold edge over T, no sheet left
+covering it (the reason then: the last border or fold left out), too many triangles, a sliver
+cell) returns ``inf`` with the reason (``WHY_*``): the caller's other bounds and subdivision
+take the cell, as before.
 
 Rounding: corner heights are direct dot products (relative error ~1e-16 of coordinates of
 order 1: the local frame has a unit diagonal). The height at a clip corner is interpolated
@@ -254,6 +265,39 @@ def _height(fx, fy, fz, j, ar, ox, oy, mc):
             zmax = max(zmax, abs(z))
         zc = min(zc, zmax)
     return zc
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _seg_d2(px, py, ax, ay, az, bx, by, bz):
+    """Squared distance from (px, py, 0) to the segment (ax, ay, az)-(bx, by, bz)."""
+    ex, ey, ez = bx - ax, by - ay, bz - az
+    wx, wy, wz = px - ax, py - ay, -az
+    ee = ex * ex + ey * ey + ez * ez
+    t = 0.0
+    if ee > 0.0:
+        t = min(1.0, max(0.0, (wx * ex + wy * ey + wz * ez) / ee))
+    dx, dy, dz = wx - t * ex, wy - t * ey, wz - t * ez
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, nogil=True)
+def _beyond_edge(tx, ty, x0, y0, z0, x1, y1, z1, sig, tol):
+    """The largest distance from the part of T (tx, ty) on the side of the line (x0, y0)-(x1, y1)
+    away from its triangle (``sig``: the sign of ``_orient`` for the triangle's third corner),
+    grown by ``tol`` (in ``_orient``'s units), to the segment (x0, y0, z0)-(x1, y1, z1): at that
+    convex polygon's corners (the distance to a segment is convex)."""
+    best = 0.0
+    for q in range(3):
+        ax_, ay_ = tx[q], ty[q]
+        bx_, by_ = tx[(q + 1) % 3], ty[(q + 1) % 3]
+        ga = sig * _orient(x0, y0, x1, y1, ax_, ay_) - tol
+        gb = sig * _orient(x0, y0, x1, y1, bx_, by_) - tol
+        if ga <= 0.0:
+            best = max(best, _seg_d2(ax_, ay_, x0, y0, z0, x1, y1, z1))
+        if (ga <= 0.0) != (gb <= 0.0):
+            t = ga / (ga - gb)
+            best = max(best, _seg_d2(ax_ + t * (bx_ - ax_), ay_ + t * (by_ - ay_), x0, y0, z0, x1, y1, z1))
+    return np.sqrt(best)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -491,6 +535,7 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
         # component is left out
         ok = True
         dropped = False
+        beyond = 0.0   # the largest distance bounded beyond a border kept
         for q in range(nu):
             cnt = ucount[q]
             # what would be wrong with this edge if it reached into T (cheap), and only then
@@ -552,6 +597,19 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
                 if bad == WHY_NON_MANIFOLD:
                     ok = False
                     break
+                if bad == WHY_BORDER:
+                    # a border kept where the part of T beyond its line is near it (a level's
+                    # chord cutting over a hole's rim): uncovered points lie there (module
+                    # docstring), each within that distance of the border, which is level 0's
+                    jj, ee = uref0[q] // 3, uref0[q] % 3
+                    s1 = _orient(fx[jj, ee], fy[jj, ee], fx[jj, (ee + 1) % 3], fy[jj, (ee + 1) % 3],
+                                 fx[jj, (ee + 2) % 3], fy[jj, (ee + 2) % 3])
+                    hb = _beyond_edge(tx, ty, fx[jj, ee], fy[jj, ee], fz[jj, ee], fx[jj, (ee + 1) % 3],
+                                      fy[jj, (ee + 1) % 3], fz[jj, (ee + 1) % 3],
+                                      1.0 if s1 > 0.0 else -1.0, margin2)
+                    if hb <= r:
+                        beyond = max(beyond, hb)
+                        continue
                 # a border or a fold over T: its component is left out (the rest may still
                 # cover T; leaving triangles out can only make the proof fail)
                 rr = _root(comp, uref0[q] // 3)
@@ -575,6 +633,6 @@ def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
             # than that into T are not checked): each is within margin * size / inradius of
             # a covered point, and the distance is 1-Lipschitz
             slack = margin * perim * size / (2.0 * area_t)
-            out[i] = (best + slack) * (1.0 + _UP_REL) + _UP_ABS
+            out[i] = (max(best, beyond) + slack) * (1.0 + _UP_REL) + _UP_ABS
             why[i] = WHY_BOUNDED
     return out, why

@@ -284,3 +284,38 @@ def test_random_loose_sheets_over_a_surface_never_below_dense_samples():
     # the pieces with a border are left out, not the surface: 198 of 200 cells bounded (97
     # when any border over a cell gave it up)
     assert bounded >= 150, bounded
+
+
+def test_a_border_along_a_sliver_of_the_cell_is_kept():
+    """The plate ends at x = 0.75 (an open rim) and the cell reaches 0.01 past it (an in-place
+    level's chord over a hole's rim): the sliver beyond the rim is within its distance to the
+    rim, and the cell is bounded by that. A cell reaching far past the rim is still given up."""
+    rng = np.random.default_rng(8)
+    pos, tri = _grid(9, lambda x, y: 0 * x)
+    tri = tri[pos[tri].mean(axis=1)[:, 0] < 0.75]  # the plate up to x = 0.75
+    cells = np.array([[[0.2, 0.2, 0.01], [0.76, 0.3, 0.01], [0.3, 0.7, 0.01]],
+                      [[0.2, 0.2, 0.01], [0.95, 0.3, 0.01], [0.3, 0.7, 0.01]]])
+    val, why = _bound(pos, tri, cells, 0.1)
+    assert why[0] == WHY_BOUNDED
+    dense = _dense_max(cells[0], pos, tri, rng)
+    # the corner 0.01 past the rim and 0.01 above the plate: sqrt(2) * 0.01 from the rim
+    assert dense <= val[0] <= 0.0142, (dense, val[0])
+    assert why[1] == WHY_BORDER and val[1] == np.inf
+
+
+def test_random_holes_never_below_dense_samples():
+    """Bumpy surfaces with random triangles removed (holes, open rims), under noisy cells:
+    borders are kept where the part of a cell beyond them is near them; every value holds."""
+    rng = np.random.default_rng(12)
+    kept_border = 0  # cells bounded
+    for trial in range(4):
+        pos, tri = _grid(17, lambda x, y: 0.02 * np.sin(6 * x + trial) * np.cos(5 * y))
+        tri = tri[rng.random(tri.shape[0]) > 0.06]
+        cpos, ctri = _grid(7, lambda x, y: 0 * x, 0.05, 0.95)
+        cells = cpos[ctri] + rng.normal(scale=0.006, size=(ctri.shape[0], 3, 3))
+        val, why = _bound(pos, tri, cells, 0.1)
+        for i in np.flatnonzero(why == WHY_BOUNDED):
+            assert val[i] >= _dense_max(cells[i], pos, tri, rng, 1500), (trial, i)
+        kept_border += int((why == WHY_BOUNDED).sum())
+    # 120 of the 288 cells bounded (95 when every border over a cell left its piece out)
+    assert kept_border >= 110, kept_border
