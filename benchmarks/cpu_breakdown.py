@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import inspect
 import math
 import os
 import resource
@@ -138,16 +139,20 @@ def breakdown(inputs: list[str]) -> None:
     inner = Timer()
     directions = Timer()
     stages = Timer()
-    directions.wrap(surface_error, "_direction", _direction_label, _direction_tally)
+    # the bound's directions, by direction and level size; the signature of the function wrapped
+    signature = inspect.signature(directions.wrap(surface_error, "_direction", _direction_label,
+                                                  _direction_tally))
     _stage_tallies(stages, surface_error)
     # per direction: (CPU s, source's triangles, target's triangles, moved, bound, largest evaluated)
     each: list[tuple] = []
     timed_direction = surface_error._direction
 
-    def one_direction(src, dst, *args, **kwargs):
+    def one_direction(*args, **kwargs):
+        src, dst = args[0], args[1]
         t = time.process_time()
-        res = timed_direction(src, dst, *args, **kwargs)
-        moved = (args[5] if len(args) > 5 else kwargs.get("same")) is not None  # _direction(src, dst, shared, samples, tolerance, work, lower, same)
+        res = timed_direction(*args, **kwargs)
+        # a moved level: its rows equal to level 0's are given (``same``)
+        moved = signature.bind(*args, **kwargs).arguments.get("same") is not None
         each.append((time.process_time() - t, src.tri.shape[0], dst.tri.shape[0], moved,
                      res[0].upper, res[0].lower))
         return res
