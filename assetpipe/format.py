@@ -83,6 +83,12 @@ def _json(value) -> bytes:
     return (json.dumps(value, indent=2, ensure_ascii=False, allow_nan=False) + "\n").encode("utf-8")
 
 
+def _bytes_view(a: np.ndarray) -> memoryview:
+    """A C-contiguous array's own bytes (``len`` is its size in bytes), joined once below
+    instead of copied by ``tobytes`` first."""
+    return memoryview(a.reshape(-1)).cast("B")
+
+
 def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[OutputMaterial],
                  layout: tuple[str, ...], layout_components: dict[str, int], *, stats: dict,
                  warnings: list[str], sources: list[dict], generator: str,
@@ -93,14 +99,14 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
     levels' ranges. Indices are local to their mesh. ID.vtx: every mesh's vertices, interleaved
     float32 in ``layout`` order.
     """
-    idx_parts: list[bytes] = []
-    vtx_parts: list[bytes] = []
+    idx_parts: list[memoryview] = []
+    vtx_parts: list[memoryview] = []
     idx_off = vtx_off = 0
     seed_meshes, side_meshes, lod_ranges = [], [], []
     for m in meshes:
         v32 = np.ascontiguousarray(m.vertices, dtype="<f4")
-        vbytes = v32.tobytes()
-        lod0 = np.ascontiguousarray(m.lods[0].indices, dtype="<u4").tobytes()
+        vbytes = _bytes_view(v32)
+        lod0 = _bytes_view(np.ascontiguousarray(m.lods[0].indices, dtype="<u4"))
         seed_meshes.append({"id": m.id, "materialId": m.material_id, "idxOffset": idx_off,
                             "idxSize": len(lod0), "vtxOffset": vtx_off, "vtxSize": len(vbytes)})
         lod_ranges.append([(idx_off, len(lod0))])
@@ -110,7 +116,7 @@ def encode_model(model_id: str, meshes: list[OutputMesh], materials: list[Output
         vtx_off += len(vbytes)
     for mi, m in enumerate(meshes):  # coarser levels after all seed ranges
         for lod in m.lods[1:]:
-            b = np.ascontiguousarray(lod.indices, dtype="<u4").tobytes()
+            b = _bytes_view(np.ascontiguousarray(lod.indices, dtype="<u4"))
             lod_ranges[mi].append((idx_off, len(b)))
             idx_parts.append(b)
             idx_off += len(b)

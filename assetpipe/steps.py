@@ -21,7 +21,7 @@ import numpy as np
 from assetpipe import __version__
 from assetpipe.core.errors import AssetError
 from assetpipe.core.rows import column_bounds
-from assetpipe.cache.serialize import pack, unpack
+from assetpipe.cache.serialize import pack_chunks, unpack
 from assetpipe.cache.store import Store
 
 def call_task(fn, *args) -> tuple[str, object, float]:
@@ -106,7 +106,7 @@ def task_import(store_root: str, source: str, budgets: dict | None = None) -> di
     deps = [{"path": _relative(d, base), "digest": digest_file(d)}
             for d in model.dependencies if Path(d).resolve() not in image_paths]
     # geometry only: a material or texture edit leaves this blob, and the steps keyed on it, alone
-    blobs["geometry"] = store.put_blob(pack({"meshes": meshes}, arrays))
+    blobs["geometry"] = store.put_blob(pack_chunks({"meshes": meshes}, arrays))
     if model.meshes:
         pos = np.vstack([m.positions for m in model.meshes])
         lo, hi = column_bounds(pos) if pos.size else (np.zeros(3), np.zeros(3))
@@ -178,7 +178,7 @@ def task_mesh(store_root: str, geometry_digest: str, uv_set_per_mesh: list[int],
                         f"{step / diag:.2g} of the model's size (over {FLOAT32_WARN_FRACTION:g}): shapes are "
                         "distorted" + ("" if offset is not None else
                                       "; build with --recenter to write positions relative to the model's centre"))
-    blob = store.put_blob(pack({"meshes": out_meta}, arrays))
+    blob = store.put_blob(pack_chunks({"meshes": out_meta}, arrays))
     return {"blobs": {"mesh": blob},
             "meta": {"triangles": int(sum(arrays[f"{i}.indices"].shape[0] for i in range(len(meshes)))),
                      "degenerate": int(sum(m["degenerate"] for m in out_meta)),
@@ -289,7 +289,7 @@ def task_lod(store_root: str, mesh_digest: str, layout: list[str], lod_options: 
             if lm.duplicates:
                 entry["duplicateTriangles"] = lm.duplicates
             out_meta.append(entry)
-    blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
+    blob = store.put_blob(pack_chunks({"meshes": out_meta}, out_arrays))
     return {"blobs": {"lod": blob},
             "meta": {"switchDistances": [[lv["switchDistance"] for lv in m["lods"]] for m in out_meta]}}
 
@@ -332,7 +332,7 @@ def task_lod_handmade(store_root: str, mesh_digests: list[str], lod_options: dic
                                 "switchDistance": running * ppu, "vertexCount": int(offset), "handmade": True})
         out_arrays[f"{i}.vertices"] = np.vstack(all_verts)
         out_meta.append({**m, "lods": levels_meta})
-    blob = store.put_blob(pack({"meshes": out_meta}, out_arrays))
+    blob = store.put_blob(pack_chunks({"meshes": out_meta}, out_arrays))
     return {"blobs": {"lod": blob},
             "meta": {"switchDistances": [[lv["switchDistance"] for lv in m["lods"]] for m in out_meta]}}
 

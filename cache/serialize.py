@@ -29,10 +29,18 @@ SHARE_MIN_BYTES = 256
 
 
 def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
+    """The pack of ``meta`` and ``arrays`` (module docstring), as one bytes object."""
+    return b"".join(pack_chunks(meta, arrays))
+
+
+def pack_chunks(meta: dict, arrays: dict[str, np.ndarray]) -> list:
+    """:func:`pack` as a list of bytes-like pieces whose concatenation is the pack: the arrays'
+    own buffers, not copies (``Store.put_blob`` hashes and writes the pieces in turn; two
+    copies of every step output fewer). The arrays must not change while the list is used."""
     entries = []
-    chunks = []
+    chunks: list = []
     offset = 0
-    stored: dict[bytes, list[tuple[bytes, int]]] = {}  # digest -> (bytes, offset) of arrays stored
+    stored: dict[bytes, list[tuple[memoryview, int]]] = {}  # digest -> (bytes, offset) of arrays stored
     for name in sorted(arrays):
         a = np.asarray(arrays[name], order="C")  # not ascontiguousarray: it makes 0-d arrays 1-d
         if a.dtype.hasobject:
@@ -40,7 +48,7 @@ def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
         if a.dtype.fields is not None or a.dtype.subdtype is not None:  # dtype.str would lose the fields
             raise TypeError(f"array {name!r} has a structured dtype")
         a = a.astype(a.dtype.newbyteorder("<"), copy=False)
-        raw = a.tobytes()
+        raw = memoryview(np.ascontiguousarray(a).reshape(-1).view(np.uint8))
         entry = {"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "size": a.nbytes}
         if a.nbytes >= SHARE_MIN_BYTES:
             same = stored.setdefault(xxhash.xxh3_128_digest(raw), [])
@@ -49,16 +57,18 @@ def pack(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
                 entries.append({**entry, "offset": at})
                 continue
         pad = -offset % _ALIGN
-        chunks.append(b"\0" * pad)
+        if pad:
+            chunks.append(b"\0" * pad)
         offset += pad
         if a.nbytes >= SHARE_MIN_BYTES:
             same.append((raw, offset))
         entries.append({**entry, "offset": offset})
-        chunks.append(raw)
+        if a.nbytes:
+            chunks.append(raw)
         offset += a.nbytes
     header = json.dumps({"meta": meta, "arrays": entries}, sort_keys=True, separators=(",", ":"),
                         allow_nan=False).encode()
-    return MAGIC + struct.pack("<I", len(header)) + header + b"".join(chunks)
+    return [MAGIC + struct.pack("<I", len(header)) + header, *chunks]
 
 
 def unpack(data: bytes) -> tuple[dict, dict[str, np.ndarray]]:

@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 
 from assetpipe.core.errors import CacheError
-from assetpipe.core.hashing import PREFIX, canonical_json, digest_bytes
+from assetpipe.core.hashing import PREFIX, canonical_json, digest_bytes, digest_chunks
 from assetpipe.core.writer import write_all
 
 ENV_VAR = "ASSETPIPE_CACHE"
@@ -173,7 +173,9 @@ class Store:
         except OSError as exc:
             raise CacheError(f"cannot read from the cache folder {self.root}: {exc.strerror}") from None
 
-    def _write(self, path: Path, data: bytes, mode: int | None = None) -> None:
+    def _write(self, path: Path, data, mode: int | None = None) -> None:
+        """Write ``data`` (bytes-like, or a list or tuple of bytes-like pieces) at ``path``,
+        atomically (through ``tmp/``)."""
         self.writes += 1
         for attempt in (0, 1):
             tmp = None
@@ -186,7 +188,8 @@ class Store:
 
                 fd, tmp = tempfile.mkstemp(dir=self.root / "tmp")
                 with os.fdopen(fd, "wb") as f:
-                    write_all(f, data)
+                    for piece in (data if isinstance(data, (list, tuple)) else (data,)):
+                        write_all(f, piece)
                 if mode is not None:
                     os.chmod(tmp, mode)
                 os.replace(tmp, path)
@@ -210,8 +213,12 @@ class Store:
             pass
 
     # -- blobs --------------------------------------------------------------------------
-    def put_blob(self, data: bytes) -> str:
-        digest = digest_bytes(data)
+    def put_blob(self, data) -> str:
+        """Store a blob; its digest. ``data``: bytes-like, or a list or tuple of bytes-like
+        pieces of it (:func:`assetpipe.cache.serialize.pack_chunks`: the pieces are hashed and
+        written in turn, never joined into one copy)."""
+        chunked = isinstance(data, (list, tuple))
+        digest = digest_chunks(data) if chunked else digest_bytes(data)
         path = self._path("objects", digest)
         if self.get_blob(digest) is None:  # absent, or present but corrupt (dropped): write it
             self._write(path, data, BLOB_MODE)

@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 
-from assetpipe.cache.serialize import MAGIC, pack, unpack
+from assetpipe.cache.serialize import MAGIC, pack, pack_chunks, unpack
 
 DTYPES = ["<f4", ">f4", "<f8", "<f2", "<u4", ">u4", "<i8", "<u2", "u1", "i1", "?", "<c8", "<c16", "<U3",
           "S5", "<M8[s]", "<m8[ms]"]
@@ -166,3 +166,14 @@ def test_small_equal_arrays_are_stored_each():
     assert np.array_equal(back["a"], small) and np.array_equal(back["b"], small)
     header_offsets = {e["offset"] for e in json.loads(data[8:8 + struct.unpack_from("<I", data, 4)[0]])["arrays"]}
     assert len(header_offsets) == 2
+
+
+def test_chunks_join_to_the_pack_and_are_the_arrays_own_memory():
+    big = np.arange(300_000, dtype="<f4").reshape(-1, 3)
+    arrays = {"big": big, "small": np.arange(5, dtype="<u2"), "same": big.copy(), "empty": np.zeros((0, 3))}
+    pieces = pack_chunks({"k": 1}, arrays)
+    assert b"".join(pieces) == pack({"k": 1}, arrays)
+    # the large array is written from its own buffer, not from a copy (the shared copy
+    # "same" is stored once: its entry reads big's bytes)
+    assert any(isinstance(p, memoryview) and np.shares_memory(np.frombuffer(p, np.uint8), big) for p in pieces)
+    assert sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces) == len(pack({"k": 1}, arrays))

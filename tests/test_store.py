@@ -38,6 +38,15 @@ def test_blob_round_trip(store):
     assert store.dropped == []
 
 
+def test_blob_put_in_pieces_is_the_blob_of_their_concatenation(store):
+    pieces = [b"head", memoryview(os.urandom(3 << 20)), b"", memoryview(bytearray(b"tail"))]
+    whole = b"".join(pieces)
+    d = store.put_blob(pieces)
+    assert d == digest_bytes(whole)
+    assert store.blob_path(d).read_bytes() == whole and store.get_blob(d) == whole
+    assert store.put_blob(whole) == d and store.put_blob(tuple(pieces)) == d
+
+
 def test_absent_blob(store):
     d = digest_bytes(b"never stored")
     assert store.get_blob(d) is None and not store.has_blob(d)

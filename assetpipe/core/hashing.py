@@ -23,6 +23,15 @@ def digest_bytes(data: bytes | bytearray | memoryview) -> str:
     return PREFIX + xxhash.xxh3_128_hexdigest(data)
 
 
+def digest_chunks(chunks) -> str:
+    """:func:`digest_bytes` of the concatenation of ``chunks`` (bytes-like pieces), without
+    making it."""
+    h = xxhash.xxh3_128()
+    for c in chunks:
+        h.update(c)
+    return PREFIX + h.hexdigest()
+
+
 def digest_file(path: str | Path) -> str:
     """Digest of a file's content, read in 1 MiB chunks (constant memory)."""
     h = xxhash.xxh3_128()

@@ -361,17 +361,18 @@ def write_ktx2(levels: Sequence[np.ndarray], vk_format: int, kv: dict[str, bytes
                                               write_checksum=True).compress
 
     offsets, lengths, raw_lengths = [0] * n, [0] * n, [0] * n
-    chunks: list[bytes] = []
+    chunks: list = []
     for k in range(n - 1, -1, -1):  # smallest level first in the file
         padding = _pad(pos, align)
         chunks.append(b"\x00" * padding)
         pos += padding
         offsets[k] = pos
-        data = np.ascontiguousarray(levels[k]).tobytes()
-        raw_lengths[k] = len(data)
+        # the level's own buffer (joined once below, not copied first)
+        data = memoryview(np.ascontiguousarray(levels[k]).reshape(-1))
+        raw_lengths[k] = data.nbytes
         if compress is not None:
             data = compress(data)
-        lengths[k] = len(data)
+        lengths[k] = len(data) if compress is not None else data.nbytes
         chunks.append(data)
         pos += len(data)
 
