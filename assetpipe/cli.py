@@ -377,5 +377,36 @@ def watch(inputs, out_dir, preview, debounce, jobs, cache_dir, layout, lod_ratio
         raise click.ClickException(str(exc)) from None
 
 
+def run() -> None:
+    """The process's entry (the ``assetpipe`` script, ``python -m assetpipe.cli``): :func:`main`,
+    then the exit handlers, then the process ends without tearing the interpreter down.
+
+    Tearing it down frees every object one by one, numba's compiled kernels and their LLVM
+    modules among them: 0.18 s after a cold corpus build (0.184 and 0.186 s from the summary
+    line to the process's end, against 0.009 and 0.011 s so). Nothing is lost: every file the
+    command writes is closed before it returns, the exit handlers still run, the output
+    streams are flushed, and the build's workers end with it (assetpipe/worker_life.py). A
+    caller of :func:`main` in its own process (the tests) is not affected."""
+    import atexit
+
+    try:
+        main()
+        code = 0
+    except SystemExit as exc:  # click's standalone mode ends every command so
+        code = exc.code
+    if code is None:
+        code = 0
+    elif not isinstance(code, int):
+        print(code, file=sys.stderr)
+        code = 1
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: nothing more to say on it
+            pass
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    run()

@@ -41,3 +41,26 @@ def test_ratios_are_read_as_numbers_or_fractions():
         eval_ratio("1/0")
     with pytest.raises(ValueError):
         eval_ratio("1/x")
+
+
+def test_process_entry_keeps_exit_codes_output_and_exit_handlers(tmp_path):
+    """``run`` (the script's entry) ends the process with os._exit: the command's exit code,
+    its output flushed into a pipe, and the exit handlers run all the same."""
+    import subprocess
+    import sys
+
+    def entry(*argv: str) -> subprocess.CompletedProcess:
+        code = ("import atexit, sys\nfrom assetpipe import cli\n"
+                "atexit.register(lambda: print('exit handler ran'))\n"
+                f"sys.argv = ['assetpipe', *{list(argv)!r}]\ncli.run()\nprint('not reached')\n")
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+
+    ok = entry("--version")
+    assert ok.returncode == 0, ok.stderr
+    assert "assetpipe, version" in ok.stdout and "exit handler ran" in ok.stdout
+    assert "not reached" not in ok.stdout
+    missing = entry("build", str(tmp_path / "missing.gltf"))
+    assert missing.returncode == 1 and "no such file or folder" in missing.stderr
+    assert "exit handler ran" in missing.stdout
+    usage = entry("build", "--no-such-option")
+    assert usage.returncode == 2 and "No such option" in usage.stderr and "exit handler ran" in usage.stdout
