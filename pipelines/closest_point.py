@@ -25,6 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+# error_model="numpy" on every kernel: a division by zero gives inf or NaN instead of raising, which
+# drops numba's zero-divisor checks from the inner loops (the corpus's cold build 0.969x the time,
+# outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle)
+
 from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines.distance_kernels import _dist2, dist2_parts, triangle_parts
 
@@ -38,13 +42,13 @@ _BINS = 16      # SAH candidate planes per axis
 _SAH_DEPTH = 48  # below this depth, median splits only: depth <= 48 + log2(M) < _STACK
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _area(lx, ly, lz, hx, hy, hz):
     dx, dy, dz = hx - lx, hy - ly, hz - lz
     return dx * dy + dy * dz + dz * dx
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch, dscratch):
     """Best binned-SAH plane over the three axes: returns the split position in
     ``order[s:e]`` (and the rows ``d[s:e]`` with it) after partitioning it (0 if no plane
@@ -127,7 +131,7 @@ def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scrat
     return w
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _build(a, b, c, leaf):
     m = a.shape[0]
     # per slot (permuted along with ``order``): centroid, box low, box high
@@ -208,7 +212,7 @@ def _build(a, b, c, leaf):
         _table(a, b, c, order)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _table(a, b, c, order):
     """Per triangle, in leaf order (a leaf's triangles contiguous in memory), what
     :func:`pipelines.distance_kernels.dist2_parts` needs that does not depend on the point
@@ -228,7 +232,7 @@ def _table(a, b, c, order):
     return t
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _dist2_table(px, py, pz, t, f):
     """:func:`pipelines.distance_kernels._dist2` on row f of :func:`_table`."""
     return dist2_parts(px - t[f, 0], py - t[f, 1], pz - t[f, 2], t[f, 3], t[f, 4], t[f, 5],
@@ -236,7 +240,7 @@ def _dist2_table(px, py, pz, t, f):
                        t[f, 13], t[f, 14] > 0.0)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _box2(px, py, pz, box, n):
     d = 0.0
     v = box[n, 0] - px
@@ -263,7 +267,7 @@ def _box2(px, py, pz, box, n):
     return d
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _nearest(px, py, pz, h, r, box, left, first, count, order, table, a, b, c, stack, sd):
     """(squared distance, triangle) of the triangle nearest (px, py, pz) within radius r
     (inf: none; (inf, -1) when nothing is within it); h: a triangle to try first (-1: none).
@@ -309,7 +313,7 @@ def _nearest(px, py, pz, h, r, box, left, first, count, order, table, a, b, c, s
     return best, bf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _query(p, hint, radius, box, left, first, count, order, table, a, b, c):
     k = p.shape[0]
     out_d = np.empty(k)
@@ -324,7 +328,7 @@ def _query(p, hint, radius, box, left, first, count, order, table, a, b, c):
     return out_d, out_f
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _within(px, py, pz, r2, box, left, first, count, table, stack):
     """The slot (in :func:`_table`) of some triangle within squared distance r2 of
     (px, py, pz), or -1: the first one found ends the walk (nearest box first)."""
@@ -365,7 +369,7 @@ def _within(px, py, pz, r2, box, left, first, count, table, stack):
 _MAX_SEEDS = 64
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _max_query(p, stop, box, left, first, count, order, table, a, b, c):
     """The largest squared nearest distance of the points (exact: the largest of what
     :func:`_query` gives them), and whether it stopped early because its square root
@@ -404,7 +408,7 @@ def _max_query(p, stop, box, left, first, count, order, table, a, b, c):
     return m2, False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _spread10(x):
     x &= 0x3FF
     x = (x | (x << 16)) & 0x030000FF
@@ -414,7 +418,7 @@ def _spread10(x):
     return x
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _morton(p, lo, scale):
     k = p.shape[0]
     out = np.empty(k, dtype=np.int64)

@@ -22,13 +22,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# error_model="numpy" on every kernel: a division by zero gives inf or NaN instead of raising, which
+# drops numba's zero-divisor checks from the inner loops (the corpus's cold build 0.969x the time,
+# outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle)
+
 _UP = 1.0 + 1e-12  # relative round-up of a bound assembled from rounded float64 values
 # two triangles this close to parallel (the sine of the angle between their planes) are cut
 # by a wall of one of them in the pair bound too (:func:`_pair`): T-junctions on flat faces
 COPLANAR_SIN = 1e-3
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def dist2_parts(apx, apy, apz, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, plane):
     """Squared distance from a point to a triangle given by what does not depend on the point:
     ``ap`` = point - a, edges ``ab`` and ``ac``, their dot products ``d00 = ab.ab``,
@@ -62,7 +66,7 @@ def dist2_parts(apx, apy, apz, abx, aby, abz, acx, acy, acz, d00, d01, d11, det,
     return min(best, rx * rx + ry * ry + rz * rz)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def triangle_parts(a, b, c, f):
     """What :func:`dist2_parts` needs of triangle f besides the point: (a, ab, ac, d00, d01,
     d11, det, dd, plane). Degenerate (``det <= 1e-12 d00 d11``): edges only; never below the
@@ -79,7 +83,7 @@ def triangle_parts(a, b, c, f):
     return ax, ay, az, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, det > 1e-12 * d00 * d11
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _dist2(px, py, pz, a, b, c, f):
     """Squared distance from (px, py, pz) to triangle f (see :func:`dist2_parts`)."""
     ax, ay, az, abx, aby, abz, acx, acy, acz, d00, d01, d11, det, dd, plane = triangle_parts(a, b, c, f)
@@ -87,7 +91,7 @@ def _dist2(px, py, pz, a, b, c, f):
                        d00, d01, d11, det, dd, plane)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def tri_distance(p, faces, a, b, c):
     """Exact float64 distance from p[i] to triangle faces[i]: (K,) float64."""
     k = p.shape[0]
@@ -97,7 +101,7 @@ def tri_distance(p, faces, a, b, c):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cell_max(v, i, a, b, c, f):
     """max over the corners of cell i of the distance to triangle f (d_f is convex on the
     cell, so this is its maximum over the whole cell)."""
@@ -107,7 +111,7 @@ def _cell_max(v, i, a, b, c, f):
     return np.sqrt(m)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _seen_before(row, j):
     """Whether row[j] is among row[:j] (a triangle listed twice is evaluated once)."""
     for q in range(j):
@@ -116,7 +120,7 @@ def _seen_before(row, j):
     return False
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _convex_cell(v, i, cand, a, b, c):
     """:func:`convex_bound` of cell i over the triangles ``cand`` (C,): (bound, triangle)."""
     bv = np.inf
@@ -132,7 +136,7 @@ def _convex_cell(v, i, cand, a, b, c):
     return bv, bf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def convex_bound(v, cand, a, b, c):
     """Convexity bound of every cell over its candidate triangles.
 
@@ -148,7 +152,7 @@ def convex_bound(v, cand, a, b, c):
     return val, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _closest_point(px, py, pz, a, b, c, f):
     """Closest point of triangle f to p (Ericson, Real-Time Collision Detection 5.1.5);
     degenerate triangles fall back to the nearest of the three edges."""
@@ -216,7 +220,7 @@ def _closest_point(px, py, pz, a, b, c, f):
     return rx, ry, rz
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def closest_points(p, faces, a, b, c):
     """Closest point of triangle faces[i] to p[i]: (K, 3) float64."""
     k = p.shape[0]
@@ -227,14 +231,14 @@ def closest_points(p, faces, a, b, c):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _unit(x, y, z):
     n = np.sqrt(x * x + y * y + z * z)
     n = max(n, 1e-300)
     return x / n, y / n, z / n
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _corner(a, b, c, f, j):
     if j == 0:
         return a[f, 0], a[f, 1], a[f, 2]
@@ -243,7 +247,7 @@ def _corner(a, b, c, f, j):
     return c[f, 0], c[f, 1], c[f, 2]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _cut_bound(v, i, f1, f2, ox, oy, oz, mx, my, mz, a, b, c):
     """Bound over cell i cut by the plane through o with normal m: ``d <= d_f1`` on the side
     m points to (s >= 0), ``d <= d_f2`` on the other; inf when the plane is unusable."""
@@ -276,14 +280,14 @@ def _cut_bound(v, i, f1, f2, ox, oy, oz, mx, my, mz, a, b, c):
     return r * _UP
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _normal(a, b, c, f):
     ux, uy, uz = b[f, 0] - a[f, 0], b[f, 1] - a[f, 1], b[f, 2] - a[f, 2]
     wx, wy, wz = c[f, 0] - a[f, 0], c[f, 1] - a[f, 1], c[f, 2] - a[f, 2]
     return uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _coplanar(a, b, c, f1, f2):
     """Whether triangles f1 and f2 lie in parallel planes to within COPLANAR_SIN (both with an
     area)."""
@@ -297,7 +301,7 @@ def _coplanar(a, b, c, f1, f2):
     return l1 > 0.0 and l2 > 0.0 and cx * cx + cy * cy + cz * cz <= COPLANAR_SIN * COPLANAR_SIN * l1 * l2
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _wall(a, b, c, f, j):
     """The wall of triangle f's edge j (corner j to corner j + 1): a point of it and its unit
     normal pointing into f, in f's plane; a zero normal for a degenerate triangle (the plane is
@@ -309,7 +313,7 @@ def _wall(a, b, c, f, j):
     return e0x, e0y, e0z, mx, my, mz
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _into(e0x, e0y, e0z, e1x, e1y, e1z, ox, oy, oz):
     """The unit normal of the line through e0 and e1 towards o, in the plane of the three (the
     zero vector when o is on the line)."""
@@ -319,7 +323,7 @@ def _into(e0x, e0y, e0z, e1x, e1y, e1z, ox, oy, oz):
     return _unit(wx - t * edx, wy - t * edy, wz - t * edz)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pair(v, i, f1, f2, a, b, c, wtri, thr):
     """Bound of the distance to the target over cell i from two target triangles f1 != f2:
     the cell is cut by a plane; on f1's side ``d <= d_f1``, on the other ``d <= d_f2``, both
@@ -383,7 +387,7 @@ def _pair(v, i, f1, f2, a, b, c, wtri, thr):
     return r
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def pair_bound(v, hint, others, a, b, c, wtri, thr):
     """Smallest pair bound of every cell: (K,) float64, inf where no pair applies.
 
@@ -398,7 +402,7 @@ def pair_bound(v, hint, others, a, b, c, wtri, thr):
     return out
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _pair_cell(v, i, h, others, a, b, c, wtri, thr):
     """:func:`pair_bound` of cell i: its best triangle ``h`` paired with each of ``others`` (C,);
     where that leaves the cell above ``thr``, also two of ``others`` that lie in one plane
@@ -429,7 +433,7 @@ def _pair_cell(v, i, h, others, a, b, c, wtri, thr):
     return bv
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
     """Covering radius of a triangle's corners, ``max over p in T of min_i |p - v_i|``,
     rounded up. Non-obtuse: the circumradius (the circumcentre lies in T). Obtuse at C (AB the
@@ -473,7 +477,7 @@ def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
     return min(r, L) * _UP
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def covering_radius(a, b, c):
     """Covering radius of each triangle's corners (a, b, c: (K, 3) float64): (K,) float64,
     exact up to rounding and rounded up (see :func:`_cover`)."""
@@ -484,7 +488,7 @@ def covering_radius(a, b, c):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def lipschitz_bound(v, d):
     """Upper bound of a 1-Lipschitz function on cells v (K, 3, 3) with corner values d (K, 3):
     ``min(max_i d_i + R, min_i (d_i + max_j |v_j - v_i|))``, R the covering radius of the
@@ -506,7 +510,7 @@ def lipschitz_bound(v, d):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
     """The first bounds of every cell in turn, each only where the ones before leave it above
     ``thr``: :func:`lipschitz_bound`; then :func:`convex_bound` over (hint, f0, f1, f2) (the
@@ -536,7 +540,7 @@ def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
     return ub, out_hint
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def area_cumsum(pos, tri):
     """(M,) float64: the running sum of the triangles' areas (a non-finite area counts 0),
     bit for bit numpy's ``cumsum(0.5 * norm(cross(b - a, c - a), axis=1))``, without the
@@ -559,7 +563,7 @@ def area_cumsum(pos, tri):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def area_samples(pos, tri, cum, u, r1, r2):
     """(P, 3) float64 points on the triangles, drawn by area: point i on the triangle where
     ``u[i] * cum[-1]`` falls in ``cum`` (numpy's searchsorted, side right, clipped to the

@@ -83,6 +83,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# error_model="numpy" on every kernel: a division by zero gives inf or NaN instead of raising, which
+# drops numba's zero-divisor checks from the inner loops (the corpus's cold build 0.969x the time,
+# outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle)
+
 from assetpipe.pipelines.distance_kernels import _dist2
 
 #: triangles of a patch at most (more: the cell is left to subdivision)
@@ -106,7 +110,7 @@ WHY_NON_MANIFOLD = 5  # an edge over the cell has more than two
 WHY_FOLDED = 6     # an edge over the cell has both triangles on one side (a fold)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _overlap(box, left, first, count, order, lo, hi, out, stack, p0, n, r, a, b, c):
     """Triangles whose box meets [lo, hi] and that reach into the slab within ``r`` of the
     plane through ``p0`` with unit normal ``n`` (a triangle wholly farther than ``r`` from the
@@ -154,12 +158,12 @@ def _overlap(box, left, first, count, order, lo, hi, out, stack, p0, n, r, a, b,
     return n_out
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _orient(ax, ay, bx, by, cx, cy):
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _separated(px, py, m, tx, ty, margin):
     """Whether the convex polygon (px, py)[:m] is separated from triangle (tx, ty) (CCW) by
     more than ``margin`` along one of the edge normals of either (exact separating-axis test
@@ -185,7 +189,7 @@ def _separated(px, py, m, tx, ty, margin):
     return _separated_by_own(px, py, m, tx, ty, margin)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _separated_by_own(px, py, m, tx, ty, margin):
     """The polygon's half of :func:`_separated`: separated along one of its own edge normals
     (either direction: the polygon's orientation is not known)."""
@@ -210,7 +214,7 @@ def _separated_by_own(px, py, m, tx, ty, margin):
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _clip(px, py, tx, ty, ox, oy, bx, by):
     """Triangle (px, py) clipped by triangle (tx, ty) (CCW): the polygon's corners into
     (ox, oy) (at most 9), their number. ``bx, by`` scratch of the same size."""
@@ -242,7 +246,7 @@ def _clip(px, py, tx, ty, ox, oy, bx, by):
     return m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _height(fx, fy, fz, j, ar, ox, oy, mc):
     """Largest |z| of triangle j's plane over its projection clipped to (ox, oy)[:mc]:
     interpolated at the polygon's corners when the projection is well-shaped and not too
@@ -267,7 +271,7 @@ def _height(fx, fy, fz, j, ar, ox, oy, mc):
     return zc
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _seg_d2(px, py, ax, ay, az, bx, by, bz):
     """Squared distance from (px, py, 0) to the segment (ax, ay, az)-(bx, by, bz)."""
     ex, ey, ez = bx - ax, by - ay, bz - az
@@ -280,7 +284,7 @@ def _seg_d2(px, py, ax, ay, az, bx, by, bz):
     return dx * dx + dy * dy + dz * dz
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _beyond_edge(tx, ty, x0, y0, z0, x1, y1, z1, sig, tol):
     """The largest distance from the part of T (tx, ty) on the side of the line (x0, y0)-(x1, y1)
     away from its triangle (``sig``: the sign of ``_orient`` for the triangle's third corner),
@@ -300,7 +304,7 @@ def _beyond_edge(tx, ty, x0, y0, z0, x1, y1, z1, sig, tol):
     return np.sqrt(best)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _root(parent, j):
     """The component of triangle j (union-find without path compression: at most PATCH_MAX)."""
     while parent[j] != j:
@@ -308,7 +312,7 @@ def _root(parent, j):
     return j
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def patch_bound(v, rho, box, left, first, count, order, a, b, c, wtri):
     """See the module docstring. Returns ((K,) float64 upper bounds, inf where the patch bound
     does not apply; (K,) int8 why: one of the ``WHY_*`` codes)."""

@@ -308,11 +308,18 @@ class _Direction:
 
 def _settle(ub: np.ndarray, thr: float, settled: float, *cells: np.ndarray):
     """Cells whose bound ``ub`` is within ``thr`` are done: returns (the largest bound settled
-    so far, ``ub`` and each of ``cells`` restricted to the cells still live)."""
-    keep = ub > thr
+    so far, ``ub`` and each of ``cells`` restricted to the cells still live). A NaN bound (the
+    kernels divide with numpy's semantics: a zero divisor gives inf or NaN, not an exception)
+    settles nothing: the cell stays live."""
+    keep = ~(ub <= thr)
     if keep.all():
         return (settled, ub, *cells)
     return (max(settled, float(ub[~keep].max())), ub[keep], *(c[keep] for c in cells))
+
+
+def _largest(ub: np.ndarray) -> float:
+    """The largest of the live cells' bounds, a NaN one counting as infinite (unbounded)."""
+    return float(np.where(np.isnan(ub), np.inf, ub).max())
 
 
 def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
@@ -357,7 +364,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
                 break
         k = v.shape[0]
         if out.queries + k > budget:  # the centroids' queries (the midpoints' are checked below)
-            settled = max(settled, float(ub.max()))
+            settled = max(settled, _largest(ub))
             out.converged = False
             break
         # the centroid's nearest triangle: usually the one whose plane the whole of T is near
@@ -398,7 +405,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         urad = np.full(uniq.shape[0], np.inf)
         np.minimum.at(urad, inv, rad.reshape(-1))
         if out.queries + uniq.shape[0] > budget:
-            settled = max(settled, float(ub.max()))
+            settled = max(settled, _largest(ub))
             out.converged = False
             v = v[:0]
             break

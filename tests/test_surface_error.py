@@ -390,3 +390,15 @@ def test_a_pair_over_a_t_junction_is_cut_along_the_line():
     cut = pair_bound(cell, hint, others, a, b, c, wtri, 0.0)[0]
     mid = pair_bound(cell, hint, others, a, b, c, wtri, np.inf)[0]  # the mid-plane alone
     assert cut <= 1e-12 < mid
+
+
+def test_a_nan_cell_bound_settles_nothing_and_counts_as_unbounded():
+    """The bound's kernels divide with numpy's semantics (a zero divisor gives inf or NaN
+    instead of raising): a NaN bound must keep its cell live, and where the work runs out it
+    counts as infinite, never as a number below the truth."""
+    from assetpipe.pipelines.surface_error import _largest, _settle
+
+    ub = np.array([0.5, np.nan, 2.0, 0.1])
+    settled, live_ub, live = _settle(ub, 1.0, 0.0, np.arange(4))
+    assert settled == 0.5 and live.tolist() == [1, 2]
+    assert _largest(live_ub) == np.inf and _largest(np.array([0.25, 3.0])) == 3.0
