@@ -49,14 +49,16 @@ def _area(lx, ly, lz, hx, hy, hz):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch, dscratch):
+def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch, dscratch, cb):
     """Best binned-SAH plane over the three axes: returns the split position in
     ``order[s:e]`` (and the rows ``d[s:e]`` with it) after partitioning it (0 if no plane
     beats a median split's caller). ``d`` (M, 9): per slot, the triangle's centroid, box low
     and box high (kept in slot order: the passes read memory in sequence). ``cnt`` (3, B)
     int64, ``blo``/``bhi`` (3, B, 3), ``rarea`` (B,), ``rcnt`` (B,) int64, ``scratch`` (M,)
     int64 and ``dscratch`` (M, 9): work space, overwritten. One pass bins the triangles on all
-    three axes; one pass partitions (stable: each side keeps its order)."""
+    three axes; one pass partitions (stable: each side keeps its order) and gives each side's
+    bounds in ``cb`` (2, 12): box low, box high, centroid low, centroid high (what
+    :func:`_build` would compute from the side's rows: min and max are exact)."""
     best_cost = np.inf
     best_ax = -1
     best_bin = -1
@@ -111,10 +113,22 @@ def _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scrat
     ax_out[0] = best_ax
     sc = scale[best_ax]
     # stable partition: bins <= best_bin first, in order; the others after them, in order
+    for side in range(2):
+        for k in range(3):
+            cb[side, k] = np.inf
+            cb[side, 3 + k] = -np.inf
+            cb[side, 6 + k] = np.inf
+            cb[side, 9 + k] = -np.inf
     w = s
     r = 0
     for i in range(s, e):
-        if min(int((d[i, best_ax] - cl[best_ax]) * sc), _BINS - 1) <= best_bin:
+        side = 0 if min(int((d[i, best_ax] - cl[best_ax]) * sc), _BINS - 1) <= best_bin else 1
+        for k in range(3):
+            cb[side, k] = min(cb[side, k], d[i, 3 + k])
+            cb[side, 3 + k] = max(cb[side, 3 + k], d[i, 6 + k])
+            cb[side, 6 + k] = min(cb[side, 6 + k], d[i, k])
+            cb[side, 9 + k] = max(cb[side, 9 + k], d[i, k])
+        if side == 0:
             order[w] = order[i]
             for k in range(9):
                 d[w, k] = d[i, k]
@@ -158,6 +172,9 @@ def _build(a, b, c, leaf):
     rcnt = np.empty(_BINS, dtype=np.int64)
     scratch = np.empty(m, dtype=np.int64)
     dscratch = np.empty((m, 9))
+    sbd = np.empty((_STACK * 2, 12))  # a pending node's bounds, when its parent's split gave them
+    skn = np.zeros(_STACK * 2, dtype=np.bool_)
+    cb = np.empty((2, 12))
     sn[0], ss[0], se[0], sdp[0] = 0, 0, m, 0
     top = 1
     used = 1
@@ -168,16 +185,23 @@ def _build(a, b, c, leaf):
     while top > 0:
         top -= 1
         node, s, e, depth = sn[top], ss[top], se[top], sdp[top]
-        bl[:] = np.inf
-        bh[:] = -np.inf
-        cl[:] = np.inf
-        ch[:] = -np.inf
-        for i in range(s, e):
+        if skn[top]:
             for k in range(3):
-                bl[k] = min(bl[k], d[i, 3 + k])
-                bh[k] = max(bh[k], d[i, 6 + k])
-                cl[k] = min(cl[k], d[i, k])
-                ch[k] = max(ch[k], d[i, k])
+                bl[k] = sbd[top, k]
+                bh[k] = sbd[top, 3 + k]
+                cl[k] = sbd[top, 6 + k]
+                ch[k] = sbd[top, 9 + k]
+        else:
+            bl[:] = np.inf
+            bh[:] = -np.inf
+            cl[:] = np.inf
+            ch[:] = -np.inf
+            for i in range(s, e):
+                for k in range(3):
+                    bl[k] = min(bl[k], d[i, 3 + k])
+                    bh[k] = max(bh[k], d[i, 6 + k])
+                    cl[k] = min(cl[k], d[i, k])
+                    ch[k] = max(ch[k], d[i, k])
         for k in range(3):
             nlo[node, k] = bl[k]
             nhi[node, k] = bh[k]
@@ -186,7 +210,8 @@ def _build(a, b, c, leaf):
             count[node] = e - s
             continue
         mid = _sah_split(order, d, s, e, cl, ch, ax_out, cnt, blo, bhi, rarea, rcnt, scratch,
-                         dscratch) if depth < _SAH_DEPTH else 0
+                         dscratch, cb) if depth < _SAH_DEPTH else 0
+        known = s < mid < e  # the partition gave both sides' bounds
         if mid <= s or mid >= e:
             # no SAH plane (all centroids in one bin) or too deep: the median of the longest
             # centroid extent (stable sort: the same tree on every machine)
@@ -202,6 +227,12 @@ def _build(a, b, c, leaf):
         left[node] = used
         sn[top], ss[top], se[top], sdp[top] = used, s, mid, depth + 1
         sn[top + 1], ss[top + 1], se[top + 1], sdp[top + 1] = used + 1, mid, e, depth + 1
+        skn[top] = known
+        skn[top + 1] = known
+        if known:
+            for k in range(12):
+                sbd[top, k] = cb[0, k]
+                sbd[top + 1, k] = cb[1, k]
         top += 2
         used += 2
     box = np.empty((used, 6))
