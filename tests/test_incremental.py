@@ -251,11 +251,14 @@ def test_cli_noop_imports_only_what_it_uses(project):
     subprocess.run(_cli(project), capture_output=True, check=True, cwd=REPO)
     argv = ["assetpipe", "build", str(project / "src"), "-o", str(project / "out"), "--cache",
             str(project / "cache"), "-q"]
+    # main() as the script's entry (cli.run) calls it, but returning here: run() ends the
+    # process with os._exit, before anything could be printed
     code = "\n".join([
-        "import runpy, sys",
+        "import sys",
         f"sys.argv = {argv!r}",
+        "from assetpipe.cli import main",
         "try:",
-        "    runpy.run_module('assetpipe.cli', run_name='__main__')",
+        "    main()",
         "except SystemExit:",
         "    pass",
         "print(sorted(m for m in ('tempfile', 'shutil', 'traceback', 'assetpipe.renderer',",
