@@ -8,7 +8,7 @@ IMPORT = 4  # 2: geometry-only blob; 3: earcut for concave polygons, degenerate 
            # 4: meta has the bounding-box centre (--recenter)
 MESH = 5  # 5: inside-out closed meshes warned about; 2: non-finite UVs cleaned before tangents are derived; 3: float32 positions, duplicates;
           # 4: generated tangents are MikkTSpace (pipelines/tangents.py), w in glTF's convention
-LOD = 26  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
+LOD = 27  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 1.1x slack; 4: recorded Hausdorff is an upper bound;
         # 5: merged meshes, affine copies once, duplicates dropped, best of chained/direct, error budget
         # 6: candidates ranked on removed vertices; the error records its lower value and convergence
         # 7: the bound's kernels compiled (numba): same formulas, float64 rounding may differ in the last digits
@@ -41,6 +41,9 @@ LOD = 26  # 2: meshopt SimplifySparse; 3: stalled steps try pruning/sloppy at a 
         #     within the tolerance)
         # 26: the height field keeps a border over the cell where the part of the cell beyond it is near it
         #     (uncovered points there are bounded by their distance to it): recorded bounds change within the tolerance
+        # 27: the height field's patch is grown first from the target triangles near the cell's corners across edges
+        #     two triangles share (a subset of the BVH's patch; the BVH's only where that is empty or covers too
+        #     little): recorded bounds change within the tolerance
 TEXTURE = 4  # 2: --texture-compression (BC/ETC2 blocks), zstd supercompression; 3: BC7 tries 8 mode-1 partitions; 4: BC7 4 partitions without least squares, zstd level 1, ETC2/EAC from etcpak's SIMD build
 ENCODE = 3  # 2: stats count duplicate triangles; positionOffset; 3: a scene that skips levels keeps only the rows its kept levels use
 FORMAT = 1  # docs/FORMAT.md: the sidecar's formatVersion

@@ -55,7 +55,7 @@ from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
-from assetpipe.pipelines.patch_bound import patch_bound
+from assetpipe.pipelines.patch_bound import patch_bound_seeded as patch_bound  # seeded: see the call
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -263,6 +263,32 @@ class _Engine:
 # ----------------------------------------------------------------------------- the bound
 
 
+def edge_neighbours(wtri: np.ndarray) -> np.ndarray:
+    """(M, 3) int64 for triangles ``wtri`` (M, 3) int64 over welded ids: per triangle and edge
+    (corner e to e + 1), the other triangle of an edge exactly two triangles share, else -1."""
+    m = wtri.shape[0]
+    out = np.full((m, 3), -1, dtype=np.int64)
+    if m == 0:
+        return out
+    e0 = wtri.reshape(-1)
+    e1 = wtri[:, [1, 2, 0]].reshape(-1)
+    lo, hi = np.minimum(e0, e1), np.maximum(e0, e1)
+    key = lo * (int(wtri.max()) + 1) + hi
+    key[lo == hi] = -1 - np.arange(int((lo == hi).sum()))  # degenerate edges: never paired
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    new = np.ones(ks.shape[0], bool)
+    new[1:] = ks[1:] != ks[:-1]
+    start = np.flatnonzero(new)
+    count = np.diff(np.append(start, ks.shape[0]))
+    pair = start[count == 2]
+    a, b = order[pair], order[pair + 1]  # flat slots t * 3 + e
+    flat = out.reshape(-1)
+    flat[a] = b // 3
+    flat[b] = a // 3
+    return out
+
+
 @dataclass
 class _Side:
     """One mesh of a measurement, in the reference's local frame."""
@@ -274,6 +300,7 @@ class _Side:
     # the id of each vertex's position (N,): shared by the sides of one vertex array (the
     # levels measured against their reference: measure_levels)
     _weld: np.ndarray | None = None
+    _neighbours: np.ndarray | None = None
 
     @property
     def weld(self) -> np.ndarray:
@@ -296,6 +323,15 @@ class _Side:
         if self._engine is None:
             self._engine = _Engine(self.positions, self.tri)
         return self._engine
+
+    @property
+    def neighbours(self) -> np.ndarray:
+        """(M, 3) int64: per triangle and edge (corner e to corner e + 1), the other triangle
+        of the edge when exactly two triangles share it (over :attr:`weld`'s ids), else -1
+        (a border, a non-manifold or a degenerate edge)."""
+        if self._neighbours is None:
+            self._neighbours = edge_neighbours(self.welded_tri)
+        return self._neighbours
 
 
 @dataclass
@@ -359,8 +395,10 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # the height field of the target's patch under the cell (pipelines/patch_bound.py):
         # only triangles within thr of the cell can settle it, so the patch is gathered there
         if PATCH_BOUND and eng.tree.nodes is not None:
+            # seeds of the patch: the target triangles known near the cell's corners
+            seeds = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))
             val, _ = patch_bound(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a, eng.b,
-                                 eng.c, target.welded_tri)
+                                 eng.c, target.welded_tri, target.neighbours, seeds)
             ub = np.minimum(ub, val)
             settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
             if not v.shape[0]:
@@ -608,7 +646,7 @@ def _measure(ref: Reference, meshes: list[tuple[np.ndarray, np.ndarray, np.ndarr
         # what the meshes share is made before the threads start (built once, then only read;
         # the compiled kernels and the BVH queries release the GIL); in a build's worker, the
         # threads beyond this one use only idle workers' cores (assetpipe/core/cores.py)
-        ref.side.engine, ref.side.weld, ref.side.welded_tri  # noqa: B018
+        ref.side.engine, ref.side.weld, ref.side.welded_tri, ref.side.neighbours  # noqa: B018
         return map_spare(one, range(len(meshes)), threads)
     return [one(i) for i in range(len(meshes))]
 

@@ -7,8 +7,21 @@ import pytest
 
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.patch_bound import (
-    PATCH_MAX, WHY_BORDER, WHY_BOUNDED, WHY_FOLDED, WHY_NON_MANIFOLD, WHY_TOO_MANY, patch_bound)
-from assetpipe.pipelines.surface_error import points_to_mesh_distance
+    PATCH_MAX, WHY_BORDER, WHY_BOUNDED, WHY_FOLDED, WHY_NON_MANIFOLD, WHY_TOO_MANY, patch_bound,
+    patch_bound_seeded)
+from assetpipe.pipelines.surface_error import edge_neighbours, points_to_mesh_distance
+
+# every test runs with the patch gathered from the BVH alone (``patch_bound``) and grown first
+# from seed triangles across shared edges, as the bound calls it (``patch_bound_seeded``: the
+# target triangles nearest the cell's corners, as its first round knows them)
+_GATHER = ["bvh"]
+
+
+@pytest.fixture(autouse=True, params=["bvh", "grown"])
+def _gather(request):
+    _GATHER[0] = request.param
+    yield
+    _GATHER[0] = "bvh"
 
 
 def _grid(n, f, lo=0.0, hi=1.0):
@@ -26,8 +39,14 @@ def _bound(pos, tri, cells, rho):
     _, inv = np.unique(pos, axis=0, return_inverse=True)
     wtri = inv.reshape(-1)[tri]
     cells = np.ascontiguousarray(cells, dtype=np.float64)
-    return patch_bound(cells, np.full(cells.shape[0], rho), *tree.nodes, tree.a, tree.b, tree.c,
-                       np.ascontiguousarray(wtri, dtype=np.int64))
+    wtri = np.ascontiguousarray(wtri, dtype=np.int64)
+    if _GATHER[0] == "bvh":
+        return patch_bound(cells, np.full(cells.shape[0], rho), *tree.nodes, tree.a, tree.b, tree.c, wtri)
+    _, f = tree.query(cells.reshape(-1, 3))
+    f = f.reshape(-1, 3)
+    seeds = np.ascontiguousarray(np.stack([f[:, 0], f[:, 0], f[:, 1], f[:, 2]], 1))
+    return patch_bound_seeded(cells, np.full(cells.shape[0], rho), *tree.nodes, tree.a, tree.b, tree.c,
+                              wtri, edge_neighbours(wtri), seeds)
 
 
 def _dense_max(cell, pos, tri, rng, n=3000):
@@ -136,6 +155,14 @@ def test_fin_on_an_edge_under_the_cell_is_not_bounded():
     c = pos[t].mean(axis=0)
     cell = np.array([[c + [-0.2, -0.2, 0.05], c + [0.2, -0.2, 0.05], c + [0.0, 0.25, 0.05]]])
     val, why = _bound(pos2, tri2, cell, 0.2)
+    if _GATHER[0] == "grown":
+        # the patch grown across shared edges never crosses the edge three triangles share: the
+        # sheet without the fin covers the cell, and a bound over part of the target bounds the
+        # distance to all of it (at least the truth, which the fin can only lower)
+        assert why[0] == WHY_BOUNDED
+        assert val[0] >= _dense_max(cell[0], pos2, tri2, np.random.default_rng(0)) - 1e-12
+        assert val[0] <= 0.05 + 1e-9
+        return
     # the edge has three triangles, and the fin's free edges are borders over the cell
     assert why[0] in (WHY_NON_MANIFOLD, WHY_BORDER) and val[0] == np.inf
 
