@@ -122,7 +122,7 @@ def _stage_tallies(timer: Timer, surface_error) -> None:
 
     timer.wrap(surface_error, "near_bounds", "near bounds (Lipschitz, convexity, pair)",
                tally=lambda r, v, d, f, hint, thr, *a: settled(r[0], thr))
-    timer.wrap(surface_error, "patch_bound", "height field",
+    timer.wrap(surface_error, "patch_bound_seeded", "height field",
                tally=lambda r, v, rho, *a: {**settled(r[0], rho[0] if rho.size else 0.0),
                                             **dict(zip(WHY, np.bincount(r[1], minlength=len(WHY)).tolist()))})
     timer.wrap(surface_error, "pair_bound", "pair bound (after the centroid query)",

@@ -55,7 +55,7 @@ from assetpipe.core.rows import column_bounds, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
-from assetpipe.pipelines.patch_bound import patch_bound_seeded as patch_bound  # seeded: see the call
+from assetpipe.pipelines.patch_bound import patch_bound_seeded
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -397,8 +397,8 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         if PATCH_BOUND and eng.tree.nodes is not None:
             # seeds of the patch: the target triangles known near the cell's corners
             seeds = np.ascontiguousarray(np.stack([hint, f[:, 0], f[:, 1], f[:, 2]], 1))
-            val, _ = patch_bound(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a, eng.b,
-                                 eng.c, target.welded_tri, target.neighbours, seeds)
+            val, _ = patch_bound_seeded(v, np.full(v.shape[0], thr), *eng.tree.nodes, eng.a, eng.b,
+                                        eng.c, target.welded_tri, target.neighbours, seeds)
             ub = np.minimum(ub, val)
             settled, ub, v, d, f, hint = _settle(ub, thr, settled, v, d, f, hint)
             if not v.shape[0]:
