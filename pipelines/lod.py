@@ -38,7 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
-from assetpipe.core.rows import column_bounds
+from assetpipe.core.rows import column_bounds, edge_runs
 from assetpipe.pipelines import meshopt_wasm
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
@@ -134,15 +134,7 @@ def weld_for_simplification(
 
 def _non_manifold_edges(tri: np.ndarray) -> int:
     """Number of distinct undirected edges used by more than two triangles. tri: (M, 3)."""
-    if tri.size == 0:
-        return 0
-    t = tri.astype(np.int64)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    e.sort(axis=1)
-    key = np.sort(e[:, 0] * (int(t.max()) + 1) + e[:, 1])
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    counts = np.diff(np.r_[starts, key.size])
-    return int(np.count_nonzero(counts > 2))
+    return int(np.count_nonzero(edge_runs(tri)[3] > 2))
 
 
 def _attributes(uv: np.ndarray | None, normals: np.ndarray | None, opts: LodOptions,

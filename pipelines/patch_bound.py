@@ -124,6 +124,16 @@ WHY_NON_MANIFOLD = 5  # an edge over the cell has more than two
 WHY_FOLDED = 6     # an edge over the cell has both triangles on one side (a fold)
 
 
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _in_slab(a, b, c, f, nx, ny, nz, off, r):
+    """Whether triangle f reaches within ``r`` of the plane ``n . p = off`` (unit n): a triangle
+    wholly farther is farther than ``r`` from the cell in it."""
+    za = nx * a[f, 0] + ny * a[f, 1] + nz * a[f, 2] - off
+    zb = nx * b[f, 0] + ny * b[f, 1] + nz * b[f, 2] - off
+    zc = nx * c[f, 0] + ny * c[f, 1] + nz * c[f, 2] - off
+    return not ((za > r and zb > r and zc > r) or (za < -r and zb < -r and zc < -r))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _overlap(box, left, first, count, order, lo, hi, out, stack, p0, n, r, a, b, c):
     """Triangles whose box meets [lo, hi] and that reach into the slab within ``r`` of the
@@ -154,10 +164,7 @@ def _overlap(box, left, first, count, order, lo, hi, out, stack, p0, n, r, a, b,
         if l < 0:
             for j in range(first[node], first[node] + count[node]):
                 f = order[j]
-                za = nx * a[f, 0] + ny * a[f, 1] + nz * a[f, 2] - off
-                zb = nx * b[f, 0] + ny * b[f, 1] + nz * b[f, 2] - off
-                zc = nx * c[f, 0] + ny * c[f, 1] + nz * c[f, 2] - off
-                if (za > r and zb > r and zc > r) or (za < -r and zb < -r and zc < -r):
+                if not _in_slab(a, b, c, f, nx, ny, nz, off, r):
                     continue
                 if n_out >= out.shape[0]:
                     return -1
@@ -708,10 +715,7 @@ def _flood(nbr, seeds, i, lo, hi, out, fstack, vis, vstamp, p0x, p0y, p0z, e1x, 
                 or min(a[f, 1], b[f, 1], c[f, 1]) > hi[1] or max(a[f, 1], b[f, 1], c[f, 1]) < lo[1]
                 or min(a[f, 2], b[f, 2], c[f, 2]) > hi[2] or max(a[f, 2], b[f, 2], c[f, 2]) < lo[2]):
             continue
-        za = nx * a[f, 0] + ny * a[f, 1] + nz * a[f, 2] - off
-        zb = nx * b[f, 0] + ny * b[f, 1] + nz * b[f, 2] - off
-        zc = nx * c[f, 0] + ny * c[f, 1] + nz * c[f, 2] - off
-        if (za > r and zb > r and zc > r) or (za < -r and zb < -r and zc < -r):
+        if not _in_slab(a, b, c, f, nx, ny, nz, off, r):
             continue
         ax_ = (a[f, 0] - p0x) * e1x + (a[f, 1] - p0y) * e1y + (a[f, 2] - p0z) * e1z
         bx_ = (b[f, 0] - p0x) * e1x + (b[f, 1] - p0y) * e1y + (b[f, 2] - p0z) * e1z

@@ -51,7 +51,7 @@ from typing import Sequence
 import numpy as np
 
 from assetpipe.core.cores import map_spare
-from assetpipe.core.rows import column_bounds, position_ids, unique_rows
+from assetpipe.core.rows import column_bounds, edge_runs, position_ids, unique_rows
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
@@ -265,24 +265,14 @@ class _Engine:
 
 def edge_neighbours(wtri: np.ndarray) -> np.ndarray:
     """(M, 3) int64 for triangles ``wtri`` (M, 3) int64 over welded ids: per triangle and edge
-    (corner e to e + 1), the other triangle of an edge exactly two triangles share, else -1."""
-    m = wtri.shape[0]
-    out = np.full((m, 3), -1, dtype=np.int64)
-    if m == 0:
-        return out
-    e0 = wtri.reshape(-1)
-    e1 = wtri[:, [1, 2, 0]].reshape(-1)
-    lo, hi = np.minimum(e0, e1), np.maximum(e0, e1)
-    key = lo * (int(wtri.max()) + 1) + hi
-    key[lo == hi] = -1 - np.arange(int((lo == hi).sum()))  # degenerate edges: never paired
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    new = np.ones(ks.shape[0], bool)
-    new[1:] = ks[1:] != ks[:-1]
-    start = np.flatnonzero(new)
-    count = np.diff(np.append(start, ks.shape[0]))
+    (corner e to e + 1), the other triangle of an edge exactly two triangles share, else -1
+    (a border, a non-manifold or a degenerate edge)."""
+    out = np.full((wtri.shape[0], 3), -1, dtype=np.int64)
+    _, order, start, count = edge_runs(wtri)
     pair = start[count == 2]
-    a, b = order[pair], order[pair + 1]  # flat slots t * 3 + e
+    a, b = order[pair], order[pair + 1]  # slots t * 3 + e
+    ok = wtri.reshape(-1)[a] != wtri[:, [1, 2, 0]].reshape(-1)[a]  # a degenerate edge: no neighbour
+    a, b = a[ok], b[ok]
     flat = out.reshape(-1)
     flat[a] = b // 3
     flat[b] = a // 3

@@ -228,6 +228,10 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
 _BAND_BYTES = 4 << 20
 
 
+#: Pillow modes OpenCV widens to RGBA exactly as Pillow's ``convert("RGBA")`` does (no colour key)
+_WIDEN = {"RGB": cv2.COLOR_RGB2RGBA, "L": cv2.COLOR_GRAY2RGBA}
+
+
 def _to_rgba(im: Image.Image) -> np.ndarray:
     """Any Pillow mode to ``(H, W, 4)`` uint8 RGBA, honouring palette / colour-key transparency."""
     mode = im.mode
@@ -268,9 +272,6 @@ def _to_rgba(im: Image.Image) -> np.ndarray:
         out[y0:y1] = arr
     return out
 
-
-#: Pillow modes OpenCV widens to RGBA exactly as Pillow's ``convert("RGBA")`` does (no colour key)
-_WIDEN = {"RGB": cv2.COLOR_RGB2RGBA, "L": cv2.COLOR_GRAY2RGBA}
 
 
 def image_size(image: ImageSource) -> tuple[int, int] | None:

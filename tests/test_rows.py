@@ -37,3 +37,18 @@ def test_column_bounds_equal_numpy_min_max():
         np.testing.assert_array_equal(hi, rows.max(axis=0))
     one = np.array([[np.nan, 1.0]])  # NaN propagates as numpy's does
     np.testing.assert_array_equal(column_bounds(one)[0], one.min(axis=0))
+
+
+def test_edge_runs_group_each_undirected_edge_once():
+    from assetpipe.core.rows import edge_runs
+
+    # a quad of two triangles, a fin on their shared edge, and a degenerate triangle
+    tri = np.array([[0, 1, 2], [2, 1, 3], [1, 2, 4], [5, 5, 6]])
+    key, order, start, count = edge_runs(tri)
+    # the shared edge 1-2 in both directions and the fin's: three slots in one run
+    assert count.sum() == 12 and sorted(count.tolist()) == [1, 1, 1, 1, 1, 1, 1, 2, 3]
+    three = order[start[count == 3][0]:][:3]
+    assert sorted(three.tolist()) == [1, 3, 6]  # slots 0*3+1 (1-2), 1*3+0 (2-1), 2*3+0 (1-2)
+    # the degenerate edge 5-5 and the edge 6-5 / 5-6 of the degenerate triangle: 6-5 twice
+    assert key[9 + 1] == key[9 + 2] and key[9] != key[9 + 1]
+    assert edge_runs(np.zeros((0, 3), int))[3].size == 0

@@ -6,6 +6,9 @@
 * Column bounds: numpy 2.4's ``a.min(axis=0)`` over (N, 3) rows takes 1.7 ms for 50k rows
   here, one reduction per column 0.09 ms (the same values: min and max are exact).
 
+* Undirected edges of triangles, grouped (:func:`edge_runs`): the LOD step's non-manifold
+  count and the bound's edge neighbours.
+
 Array contracts: rows ``(R, k)``; ids int64.
 """
 
@@ -47,3 +50,24 @@ def column_bounds(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lo = np.array([a[:, j].min() for j in range(a.shape[1])], dtype=a.dtype)
     hi = np.array([a[:, j].max() for j in range(a.shape[1])], dtype=a.dtype)
     return lo, hi
+
+
+def edge_runs(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The undirected edges of triangles ``tri`` (M, 3) int, grouped: ``(key, order, start,
+    count)``. Slot ``t * 3 + e`` is the edge of triangle t from its corner e to corner
+    (e + 1) % 3; ``key`` (3M,) int64 is equal for the same two vertices in either direction;
+    ``order`` (3M,) int64 sorts the slots by key (stable); run i of equal keys starts at
+    ``order[start[i]]`` and has ``count[i]`` slots."""
+    t = np.asarray(tri, dtype=np.int64).reshape(-1, 3)
+    if t.shape[0] == 0:
+        z = np.zeros(0, np.int64)
+        return z, z, z, z
+    e0 = t.reshape(-1)
+    e1 = t[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(e0, e1) * (int(t.max()) + 1) + np.maximum(e0, e1)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    new = np.ones(ks.shape[0], bool)
+    new[1:] = ks[1:] != ks[:-1]
+    start = np.flatnonzero(new)
+    return key, order, start, np.diff(np.append(start, ks.shape[0]))
