@@ -31,6 +31,7 @@ from numba import njit
 
 from assetpipe.core.rows import column_bounds
 from assetpipe.pipelines.distance_kernels import _dist2, dist2_parts, triangle_parts
+from assetpipe.pipelines.kernel_arrays import borrow
 
 #: triangles per leaf at most: 4 measured fastest on the bunny (69k triangles) among 2, 4, 8
 LEAF_SIZE = 4
@@ -349,14 +350,25 @@ def _query(p, hint, radius, box, left, first, count, order, table, a, b, c):
     k = p.shape[0]
     out_d = np.empty(k)
     out_f = np.empty(k, dtype=np.int64)
-    stack = np.empty(_STACK, dtype=np.int64)
-    sd = np.empty(_STACK)
+    _query_into(p, hint, radius, box, left, first, count, order, table, a, b, c,
+                np.empty(_STACK, dtype=np.int64), np.empty(_STACK), out_d, out_f)
+    return out_d, out_f
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _query_into(p, hint, radius, box, left, first, count, order, table, a, b, c, stack, sd, out_d, out_f):
+    """:func:`_query` into ``out_d``, ``out_f``, with the traversal's stacks given: every array
+    is an argument, borrowed (:mod:`pipelines.kernel_arrays`)."""
+    p, hint, radius, box, left, first, count, order, table, a, b, c, stack, sd, out_d, out_f = (
+        borrow(p), borrow(hint), borrow(radius), borrow(box), borrow(left), borrow(first), borrow(count),
+        borrow(order), borrow(table), borrow(a), borrow(b), borrow(c), borrow(stack), borrow(sd),
+        borrow(out_d), borrow(out_f))
+    k = p.shape[0]
     for i in range(k):
         best, bf = _nearest(p[i, 0], p[i, 1], p[i, 2], hint[i], radius[i], box, left, first,
                             count, order, table, a, b, c, stack, sd)
         out_d[i] = np.sqrt(best) if bf >= 0 else np.inf
         out_f[i] = bf
-    return out_d, out_f
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -409,9 +421,18 @@ def _max_query(p, stop, box, left, first, count, order, table, a, b, c):
     A point is asked in full only when no triangle lies within the largest distance found so
     far (the previous point's triangle tried first): a point with one nearer cannot raise
     the maximum."""
+    return _max_query_with(p, stop, box, left, first, count, order, table, a, b, c,
+                           np.empty(_STACK, dtype=np.int64), np.empty(_STACK))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _max_query_with(p, stop, box, left, first, count, order, table, a, b, c, stack, sd):
+    """:func:`_max_query` with the traversal's stacks given: every array is an argument,
+    borrowed (:mod:`pipelines.kernel_arrays`)."""
+    p, box, left, first, count, order, table, a, b, c, stack, sd = (
+        borrow(p), borrow(box), borrow(left), borrow(first), borrow(count), borrow(order),
+        borrow(table), borrow(a), borrow(b), borrow(c), borrow(stack), borrow(sd))
     k = p.shape[0]
-    stack = np.empty(_STACK, dtype=np.int64)
-    sd = np.empty(_STACK)
     m2 = 0.0
     last = -1  # the slot of the triangle the previous point found within (points come in
     # spatial order: often within of the next one too)

@@ -22,9 +22,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from assetpipe.pipelines.kernel_arrays import borrow
+
 # error_model="numpy" on every kernel: a division by zero gives inf or NaN instead of raising, which
 # drops numba's zero-divisor checks from the inner loops (the corpus's cold build 0.969x the time,
-# outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle)
+# outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle). The kernels
+# called from Python borrow their array arguments (pipelines.kernel_arrays: no reference counting
+# at each helper call in their loops)
 
 _UP = 1.0 + 1e-12  # relative round-up of a bound assembled from rounded float64 values
 # two triangles this close to parallel (the sine of the angle between their planes) are cut
@@ -94,6 +98,7 @@ def _dist2(px, py, pz, a, b, c, f):
 @njit(cache=True, nogil=True, error_model="numpy")
 def tri_distance(p, faces, a, b, c):
     """Exact float64 distance from p[i] to triangle faces[i]: (K,) float64."""
+    p, faces, a, b, c = borrow(p), borrow(faces), borrow(a), borrow(b), borrow(c)
     k = p.shape[0]
     out = np.empty(k)
     for i in range(k):
@@ -144,6 +149,7 @@ def convex_bound(v, cand, a, b, c):
     evaluated once). Returns (bound (K,), the candidate that gave it (K,) int64): the smallest
     over candidates F of ``max over corners of d_F``, an upper bound of the distance to the
     target on the whole cell (``d_target <= d_F``, and ``d_F`` is convex)."""
+    v, cand, a, b, c = borrow(v), borrow(cand), borrow(a), borrow(b), borrow(c)
     k = cand.shape[0]
     val = np.empty(k)
     best = np.empty(k, dtype=np.int64)
@@ -223,6 +229,7 @@ def _closest_point(px, py, pz, a, b, c, f):
 @njit(cache=True, nogil=True, error_model="numpy")
 def closest_points(p, faces, a, b, c):
     """Closest point of triangle faces[i] to p[i]: (K, 3) float64."""
+    p, faces, a, b, c = borrow(p), borrow(faces), borrow(a), borrow(b), borrow(c)
     k = p.shape[0]
     out = np.empty((k, 3))
     for i in range(k):
@@ -395,6 +402,7 @@ def pair_bound(v, hint, others, a, b, c, wtri, thr):
     int64 triangles to pair it with (each distinct one != hint tried once); wtri (F, 3) int64
     the target's triangles over welded vertex ids (equal ids: same position); thr: the value
     that settles a cell (a pair's wall cuts are tried only above it, :func:`_pair`)."""
+    v, hint, others, a, b, c, wtri = borrow(v), borrow(hint), borrow(others), borrow(a), borrow(b), borrow(c), borrow(wtri)
     k = others.shape[0]
     out = np.empty(k)
     for i in range(k):
@@ -523,6 +531,8 @@ def near_bounds(v, d, f, hint, thr, a, b, c, wtri, pair):
     Args: v (K, 3, 3) cells; d (K, 3) upper values of the corners' distances; f (K, 3) int64 a
     target triangle near each corner; hint (K,) int64; a, b, c (F, 3) the target's corners;
     wtri (F, 3) its triangles over welded vertex ids."""
+    v, d, f, hint, a, b, c, wtri = (borrow(v), borrow(d), borrow(f), borrow(hint), borrow(a), borrow(b),
+                                    borrow(c), borrow(wtri))
     k = v.shape[0]
     ub = lipschitz_bound(v, d)
     out_hint = hint.copy()

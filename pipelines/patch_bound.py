@@ -102,6 +102,7 @@ from numba import njit
 # outputs bit-identical); a NaN bound settles nothing (pipelines.surface_error._settle)
 
 from assetpipe.pipelines.distance_kernels import _dist2
+from assetpipe.pipelines.kernel_arrays import borrow
 
 #: triangles of a patch at most (more: the cell is left to subdivision)
 PATCH_MAX = 192
@@ -340,46 +341,77 @@ def patch_bound_seeded(v, rho, box, left, first, count, order, a, b, c, wtri, nb
     k = v.shape[0]
     out = np.full(k, np.inf)
     why = np.full(k, WHY_SKIPPED, dtype=np.int8)
-    sel = np.empty(PATCH_MAX, dtype=np.int64)
-    stack = np.empty(_STACK, dtype=np.int64)
-    fx = np.empty((PATCH_MAX, 3))
-    fy = np.empty((PATCH_MAX, 3))
-    fz = np.empty((PATCH_MAX, 3))
-    far_ = np.empty(PATCH_MAX)          # twice the signed projected area
-    side = np.zeros(PATCH_MAX, dtype=np.int8)   # +1 / -1: reaches into T, facing so; 0: not
-    zmax = np.empty(PATCH_MAX)
-    carea = np.zeros(PATCH_MAX)         # the area of its projection clipped by T
-    comp = np.empty(PATCH_MAX, dtype=np.int64)    # union-find parent: the sheet's components
-    dropc = np.zeros(PATCH_MAX, dtype=np.bool_)   # a component left out (a border or fold over T)
-    comp_area = np.zeros(PATCH_MAX)     # per component (at its root): its triangles' clipped areas
-    lo = np.empty(3)
-    hi = np.empty(3)
-    nv = np.empty(3)
-    tx = np.empty(3)
-    ty = np.empty(3)
-    ox = np.empty(12)
-    oy = np.empty(12)
-    bx = np.empty(12)
-    by = np.empty(12)
-    sx = np.empty(2)
-    sy = np.empty(2)
-    hstamp = np.zeros(_HASH, dtype=np.int64)
-    hkey = np.empty(_HASH, dtype=np.int64)
-    hidx = np.empty(_HASH, dtype=np.int64)
-    uslot = np.empty(3 * PATCH_MAX, dtype=np.int64)
-    ucount = np.empty(3 * PATCH_MAX, dtype=np.int64)
-    uref0 = np.empty(3 * PATCH_MAX, dtype=np.int64)
-    uref1 = np.empty(3 * PATCH_MAX, dtype=np.int64)
-    tex = np.empty(3)
-    tey = np.empty(3)
-    tln = np.empty(3)
-    tlim = np.empty(3)
-    vq = np.empty((3, 3))
-    stamp = 0
     first_attempt = 0 if (seeds.shape[1] > 0 and nbr.shape[0] == a.shape[0]) else 1
-    vis = np.zeros(nbr.shape[0] if first_attempt == 0 else 0, dtype=np.int32)
+    nvis = nbr.shape[0] if first_attempt == 0 else 0
+    # the work space, made here and handed over as arguments: the kernel borrows every array it
+    # gets (pipelines.kernel_arrays), so its helper calls on every patch triangle count no
+    # references, and these outlive it
+    _patch_bound_into(
+        v, rho, box, left, first, count, order, a, b, c, wtri, nbr, seeds, out, why, first_attempt,
+        np.empty(PATCH_MAX, dtype=np.int64),  # sel
+        np.empty(_STACK, dtype=np.int64),  # stack
+        np.empty((PATCH_MAX, 3)),  # fx
+        np.empty((PATCH_MAX, 3)),  # fy
+        np.empty((PATCH_MAX, 3)),  # fz
+        np.empty(PATCH_MAX),  # far_: twice the signed projected area
+        np.zeros(PATCH_MAX, dtype=np.int8),  # side: +1 / -1: reaches into T, facing so; 0: not
+        np.empty(PATCH_MAX),  # zmax
+        np.zeros(PATCH_MAX),  # carea: the area of its projection clipped by T
+        np.empty(PATCH_MAX, dtype=np.int64),  # comp: union-find parent: the sheet's components
+        np.zeros(PATCH_MAX, dtype=np.bool_),  # dropc: a component left out (a border or fold over T)
+        np.zeros(PATCH_MAX),  # comp_area: per component (at its root): its triangles' clipped areas
+        np.empty(3),  # lo
+        np.empty(3),  # hi
+        np.empty(3),  # nv
+        np.empty(3),  # tx
+        np.empty(3),  # ty
+        np.empty(12),  # ox
+        np.empty(12),  # oy
+        np.empty(12),  # bx
+        np.empty(12),  # by
+        np.empty(2),  # sx
+        np.empty(2),  # sy
+        np.zeros(_HASH, dtype=np.int64),  # hstamp
+        np.empty(_HASH, dtype=np.int64),  # hkey
+        np.empty(_HASH, dtype=np.int64),  # hidx
+        np.empty(3 * PATCH_MAX, dtype=np.int64),  # uslot
+        np.empty(3 * PATCH_MAX, dtype=np.int64),  # ucount
+        np.empty(3 * PATCH_MAX, dtype=np.int64),  # uref0
+        np.empty(3 * PATCH_MAX, dtype=np.int64),  # uref1
+        np.empty(3),  # tex
+        np.empty(3),  # tey
+        np.empty(3),  # tln
+        np.empty(3),  # tlim
+        np.empty((3, 3)),  # vq
+        np.zeros(nvis, dtype=np.int32),  # vis: the grown patch's visit stamps
+        np.empty(3 * PATCH_MAX + seeds.shape[1], dtype=np.int64),  # fstack
+    )
+    return out, why
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _patch_bound_into(v, rho, box, left, first, count, order, a, b, c, wtri, nbr, seeds, out, why,
+                      first_attempt,
+                      sel, stack, fx, fy, fz, far_, side, zmax, carea, comp, dropc, comp_area, lo,
+                      hi, nv, tx, ty, ox, oy, bx, by, sx, sy, hstamp, hkey, hidx, uslot, ucount,
+                      uref0, uref1, tex, tey, tln, tlim, vq, vis, fstack):
+    """:func:`patch_bound_seeded` into ``out`` and ``why``, with its work space given (every
+    array borrowed)."""
+    (v, rho, box, left, first, count, order, a, b, c, wtri, nbr, seeds, out, why, sel, stack, fx, fy,
+     fz, far_, side, zmax, carea, comp, dropc, comp_area, lo, hi, nv, tx, ty, ox, oy, bx, by, sx, sy,
+     hstamp, hkey, hidx, uslot, ucount, uref0, uref1, tex, tey, tln, tlim, vq, vis, fstack) = (
+        borrow(v), borrow(rho), borrow(box), borrow(left), borrow(first), borrow(count), borrow(order),
+        borrow(a), borrow(b), borrow(c), borrow(wtri), borrow(nbr), borrow(seeds), borrow(out),
+        borrow(why), borrow(sel), borrow(stack), borrow(fx), borrow(fy), borrow(fz), borrow(far_),
+        borrow(side), borrow(zmax), borrow(carea), borrow(comp), borrow(dropc), borrow(comp_area),
+        borrow(lo), borrow(hi), borrow(nv), borrow(tx), borrow(ty), borrow(ox), borrow(oy), borrow(bx),
+        borrow(by), borrow(sx), borrow(sy), borrow(hstamp), borrow(hkey), borrow(hidx), borrow(uslot),
+        borrow(ucount), borrow(uref0), borrow(uref1), borrow(tex), borrow(tey), borrow(tln),
+        borrow(tlim), borrow(vq), borrow(vis), borrow(fstack)
+    )
+    k = v.shape[0]
+    stamp = 0
     vstamp = 0
-    fstack = np.empty(3 * PATCH_MAX + seeds.shape[1], dtype=np.int64)
     for i in range(k):
         r = rho[i]
         if not (r >= 0.0 and r < np.inf):
@@ -680,7 +712,6 @@ def patch_bound_seeded(v, rho, box, left, first, count, order, a, b, c, wtri, nb
             # bounded, or given up over a patch: no second gather (one is made only where the
             # grown patch was empty or covered too little of the cell: ``continue`` above)
             break
-    return out, why
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
