@@ -67,14 +67,21 @@ def _num(x: float | None) -> float | None:
 
 
 def bounds_of(positions: np.ndarray) -> dict:
-    """AABB and bounding sphere (centred on the AABB) of (N, 3) positions."""
+    """AABB and bounding sphere (centred on the AABB) of (N, 3) positions (float32 or float64,
+    any strides): in one compiled pass (:mod:`pipelines.point_bounds`), numpy's way where a
+    coordinate is not finite."""
     if positions.shape[0] == 0:
         z = [0.0, 0.0, 0.0]
         return {"min": z, "max": z, "center": z, "radius": 0.0}
-    p = positions.astype(np.float64)
-    lo, hi = column_bounds(p)
+    from assetpipe.pipelines.point_bounds import box_and_radius2
+
+    lo, hi, r2, bad = box_and_radius2(positions)
+    if bad:
+        p = positions.astype(np.float64)
+        lo, hi = column_bounds(p)
+        r2 = np.max(np.einsum("ij,ij->i", p - (lo + hi) * 0.5, p - (lo + hi) * 0.5))
     c = (lo + hi) * 0.5
-    r = float(np.sqrt(np.max(np.einsum("ij,ij->i", p - c, p - c))))
+    r = float(np.sqrt(r2))
     return {"min": [_num(v) for v in lo], "max": [_num(v) for v in hi],
             "center": [_num(v) for v in c], "radius": _num(r)}
 
