@@ -372,20 +372,38 @@ def weld_identical(indices: np.ndarray, *streams: np.ndarray | None) -> np.ndarr
     # One packed record per vertex: the raw bytes of every stream, side by side.
     packed = np.ascontiguousarray(np.concatenate(
         [np.ascontiguousarray(c).view(np.uint8).reshape(n, -1) for c in cols], axis=1))
-    remap = np.empty(n, np.uint32)
-    lib = _lib()
-    unique = lib.meshopt_generateVertexRemap(
-        remap.ctypes.data_as(_c_uint_p), tri.ctypes.data_as(_c_uint_p), tri.size,
-        packed.ctypes.data_as(ctypes.c_void_p), n, packed.shape[1])
+    remap, unique = vertex_remap(packed, tri)
     used = remap != np.uint32(0xFFFFFFFF)
     ids = np.flatnonzero(used)
     new = remap[ids].astype(np.int64)
-    order = np.argsort(new, kind="stable")  # by new id, then by old index
-    starts = np.searchsorted(new[order], np.arange(unique))
-    canonical_of_new = ids[order[starts]]
+    # the first (lowest) vertex of each set of identical ones (no sort: a stable argsort by new
+    # id took 3.5x a minimum per id here)
+    canonical_of_new = np.full(unique, n, dtype=np.int64)
+    np.minimum.at(canonical_of_new, new, ids)
     canonical = np.arange(n, dtype=np.int64)
     canonical[ids] = canonical_of_new[new]
     return canonical[tri].astype(np.uint32).reshape(-1, 3)
+
+
+def vertex_remap(packed: np.ndarray, indices: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """``meshopt_generateVertexRemap`` over ``packed`` (N, B) uint8 vertex records, compared byte
+    for byte (a hash, no sort). Returns (remap (N,) uint32, count of distinct records): with
+    ``indices`` ((K,) uint32), ids in order of first use by them and 0xFFFFFFFF for vertices they
+    do not use; without, every vertex, ids in order of first occurrence (vertex order)."""
+    packed = np.ascontiguousarray(packed, dtype=np.uint8)
+    n = packed.shape[0]
+    remap = np.empty(n, np.uint32)
+    if n == 0:
+        return remap, 0
+    if indices is None:
+        ip, count = None, n
+    else:
+        idx = np.ascontiguousarray(indices, dtype=np.uint32).reshape(-1)
+        ip, count = idx.ctypes.data_as(_c_uint_p), idx.size
+    unique = _lib().meshopt_generateVertexRemap(
+        remap.ctypes.data_as(_c_uint_p), ip, count, packed.ctypes.data_as(ctypes.c_void_p), n,
+        packed.shape[1])
+    return remap, int(unique)
 
 
 def simplifier_names() -> tuple[str, ...]:

@@ -48,6 +48,31 @@ def test_weld_joins_bit_identical_rows_in_first_occurrence_order():
     assert t.dtype == np.uint32
 
 
+def test_weld_matches_a_sort_of_the_rows_on_random_vertex_buffers():
+    """meshoptimizer's hash weld gives what ``np.unique`` over the rows' bytes gave: the first
+    vertex of each set of bit-identical rows, in first-occurrence order, and the triangles over
+    them (NaN rows with the same bits join, -0.0 joins 0.0)."""
+    rng = np.random.default_rng(3)
+    for t in range(60):
+        n = int(rng.integers(1, 2000))
+        pool = rng.standard_normal((max(1, n // 3), int(rng.integers(3, 9)))).astype(np.float32)
+        verts = pool[rng.integers(0, pool.shape[0], n)]
+        verts[rng.integers(0, n, 3)] = -0.0
+        if t % 3 == 0:
+            verts[rng.integers(0, n, 2), 0] = np.nan
+        tris = rng.integers(0, n, (int(rng.integers(1, 1500)), 3))
+        v = np.where(verts == 0.0, 0.0, verts)
+        rows = np.ascontiguousarray(v).view(np.dtype((np.void, v.dtype.itemsize * v.shape[1]))).reshape(n)
+        _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+        order = np.argsort(first, kind="stable")
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        out, t2, welded = weld_vertices(verts, tris)
+        np.testing.assert_array_equal(out, verts[first[order]])
+        np.testing.assert_array_equal(t2, rank[inverse.reshape(-1)][tris])
+        assert t2.dtype == np.uint32 and welded == n - order.size
+
+
 def test_weld_treats_negative_zero_as_zero_and_keeps_near_equal_apart():
     v = np.array([[0.0, 1, 0], [-0.0, 1, 0], [0.0, 1, np.nextafter(0.0, 1.0)], [0.0, 1, -0.0]])
     out, t, welded = weld_vertices(v, np.array([[0, 1, 2], [3, 2, 1]], np.uint32))

@@ -52,3 +52,21 @@ def test_edge_runs_group_each_undirected_edge_once():
     # the degenerate edge 5-5 and the edge 6-5 / 5-6 of the degenerate triangle: 6-5 twice
     assert key[9 + 1] == key[9 + 2] and key[9] != key[9 + 1]
     assert edge_runs(np.zeros((0, 3), int))[3].size == 0
+
+
+def test_stable_argsort_and_first_occurrences_are_numpys_stable_results():
+    """The faster sorts give numpy's own stable answers: equal keys in index order, and per
+    distinct key its lowest index (what ``np.unique(return_index=True)`` gives), on keys with
+    many repeats, few repeats, one value, and uint64 keys using all 64 bits."""
+    from assetpipe.core.rows import first_occurrences, stable_argsort
+
+    rng = np.random.default_rng(5)
+    for n, top in ((1, 1), (7, 1), (500, 3), (3000, 3000), (20000, 50)):
+        k = rng.integers(0, top, n).astype(np.int64)
+        np.testing.assert_array_equal(stable_argsort(k, top), np.argsort(k, kind="stable"))
+        np.testing.assert_array_equal(stable_argsort(k, 1 << 62), np.argsort(k, kind="stable"))  # no room: stable sort
+        np.testing.assert_array_equal(first_occurrences(k), np.unique(k, return_index=True)[1])
+    wide = rng.integers(0, 2**63 - 1, 4000, dtype=np.int64).astype(np.uint64) * np.uint64(2)
+    wide = wide[rng.integers(0, 4000, 9000)]
+    np.testing.assert_array_equal(first_occurrences(wide), np.unique(wide, return_index=True)[1])
+    assert first_occurrences(np.zeros(0, np.uint64)).size == 0

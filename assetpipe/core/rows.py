@@ -52,6 +52,33 @@ def column_bounds(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def stable_argsort(key: np.ndarray, bound: int) -> np.ndarray:
+    """``np.argsort(key, kind="stable")`` of (R,) int64 keys in ``[0, bound)``: equal keys in
+    index order. Where ``bound * R`` fits in int64 it sorts ``key * R + index`` (distinct
+    values) with numpy's default sort, which is 3.5-4x faster than the stable one on int64
+    here (AVX-512); the same permutation either way."""
+    key = np.asarray(key, dtype=np.int64)
+    r = key.shape[0]
+    if r and bound > 0 and bound * r < (1 << 62):
+        return np.argsort(key * r + np.arange(r, dtype=np.int64))
+    return np.argsort(key, kind="stable")
+
+
+def first_occurrences(key: np.ndarray) -> np.ndarray:
+    """``np.unique(key, return_index=True)[1]`` of (R,) keys: per distinct key, in increasing
+    key order, the lowest index holding it; with numpy's default sort and a minimum per run of
+    equal keys instead of the stable sort ``return_index`` asks for (3x faster here)."""
+    key = np.asarray(key).reshape(-1)
+    if key.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    order = np.argsort(key)
+    s = key[order]
+    new = np.empty(s.shape[0], bool)
+    new[0] = True
+    np.not_equal(s[1:], s[:-1], out=new[1:])
+    return np.minimum.reduceat(order, np.flatnonzero(new)).astype(np.int64)
+
+
 def edge_runs(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The undirected edges of triangles ``tri`` (M, 3) int, grouped: ``(key, order, start,
     count)``. Slot ``t * 3 + e`` is the edge of triangle t from its corner e to corner
@@ -64,8 +91,9 @@ def edge_runs(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
         return z, z, z, z
     e0 = t.reshape(-1)
     e1 = t[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(e0, e1) * (int(t.max()) + 1) + np.maximum(e0, e1)
-    order = np.argsort(key, kind="stable")
+    span = int(t.max()) + 1
+    key = np.minimum(e0, e1) * span + np.maximum(e0, e1)
+    order = stable_argsort(key, span * span)
     ks = key[order]
     new = np.ones(ks.shape[0], bool)
     new[1:] = ks[1:] != ks[:-1]
