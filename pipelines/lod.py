@@ -38,7 +38,7 @@ from typing import Sequence
 
 import numpy as np
 
-from assetpipe.core.rows import column_bounds, edge_runs
+from assetpipe.core.rows import column_bounds, edge_runs, unique_first
 from assetpipe.pipelines import meshopt_wasm
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, SIMPLIFIERS, LodOptions  # noqa: F401 (re-exported)
@@ -716,7 +716,7 @@ def reorder_for_lod_prefix(levels: Sequence[np.ndarray], vertex_count: int) -> L
         flat = np.asarray(levels[k], dtype=np.int64).reshape(-1)
         if flat.size and (flat.min() < 0 or flat.max() >= n):
             raise ValueError(f"level {k} indexes outside 0..{n - 1}")
-        uniq, first = np.unique(flat, return_index=True)
+        uniq, first = unique_first(flat)
         new = uniq[level_of[uniq] == len(levels)]
         if new.size:
             level_of[new] = k
@@ -724,7 +724,15 @@ def reorder_for_lod_prefix(levels: Sequence[np.ndarray], vertex_count: int) -> L
     # Sort: coarsest level first (higher level number first), then first use, then old index.
     unref = level_of == len(levels)
     group = np.where(unref, -1, level_of)
-    order = np.lexsort((np.arange(n), first_use, -group)).astype(np.int64)
+    # (one default sort of a combined key where it fits: distinct values, the same order as the
+    # lexsort's three stable passes)
+    top = int(max((int(first_use[~unref].max()) + 1) if (~unref).any() else 1, 1))
+    span = len(levels) + 2
+    if n and span * (top + 1) * n < (1 << 62):
+        fu = np.where(unref, top, first_use)
+        order = np.argsort(((len(levels) - group) * (top + 1) + fu) * n + np.arange(n, dtype=np.int64))
+    else:
+        order = np.lexsort((np.arange(n), first_use, -group)).astype(np.int64)
     remap = np.empty(n, np.int64)
     remap[order] = np.arange(n)
     new_levels = tuple(remap[np.asarray(l, dtype=np.int64).reshape(-1, 3)].astype(np.uint32)

@@ -31,7 +31,7 @@ from typing import Hashable, Sequence
 import numpy as np
 
 from assetpipe.core.cores import map_spare
-from assetpipe.core.rows import column_bounds, first_occurrences
+from assetpipe.core.rows import column_bounds, first_occurrences, first_use_order
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
@@ -584,8 +584,7 @@ def layout_plan(levels: Sequence[LodLevel], n: int) -> LayoutPlan:
         if lv.positions is None:
             continue
         flat = np.asarray(lv.indices, np.int64).reshape(-1)
-        ids, first = np.unique(flat, return_index=True)
-        ids = ids[np.argsort(first, kind="stable")]  # order of first use
+        ids = first_use_order(flat)
         local = np.zeros(n, np.int64)
         local[ids] = np.arange(ids.size)
         idx[k] = (local[np.asarray(lv.indices, np.int64)] + end).astype(np.uint32).reshape(-1, 3)

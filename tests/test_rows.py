@@ -70,3 +70,16 @@ def test_stable_argsort_and_first_occurrences_are_numpys_stable_results():
     wide = wide[rng.integers(0, 4000, 9000)]
     np.testing.assert_array_equal(first_occurrences(wide), np.unique(wide, return_index=True)[1])
     assert first_occurrences(np.zeros(0, np.uint64)).size == 0
+
+
+def test_unique_first_and_first_use_order_are_numpys_answers():
+    from assetpipe.core.rows import first_use_order, unique_first
+
+    rng = np.random.default_rng(8)
+    for n, top in ((0, 1), (1, 1), (300, 7), (5000, 4000)):
+        k = rng.integers(0, top, n).astype(np.int64)
+        u, f = np.unique(k, return_index=True)
+        u2, f2 = unique_first(k)
+        np.testing.assert_array_equal(u, u2)
+        np.testing.assert_array_equal(f, f2)
+        np.testing.assert_array_equal(first_use_order(k), u[np.argsort(f, kind="stable")])
