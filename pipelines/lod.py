@@ -419,14 +419,14 @@ class _Estimator:
                 moved = np.any(pos != self.local, axis=1)
                 off |= used & moved
             pts = np.concatenate([sample_surface(pos, tri, self.n, self.seed + 1),
-                                  pos[self._subset(np.flatnonzero(off))]])
+                                  pos.take(self._subset(np.flatnonzero(off)), axis=0)])
             # exact, without finding every point's nearest triangle (max_distance)
             return self._engine.tree.max_distance(pts)[0], used, moved
 
         def forward(i: int, used: np.ndarray, moved: np.ndarray | None, stop: float = math.inf) -> float:
             gone = ~used if moved is None else ~used | moved
             removed = self._subset(np.flatnonzero(self.used & gone))
-            pts = np.concatenate([self.samples, self.local[removed]])
+            pts = np.concatenate([self.samples, self.local.take(removed, axis=0)])
             tri = cands[i][0]
             eng = self.engine_for(tri)
             if eng is None:

@@ -431,7 +431,7 @@ def _bound_direction(v: np.ndarray, d: np.ndarray, f: np.ndarray, target: _Side,
         # np.unique over 24-byte voids for 3k-300k midpoints)
         flat = np.ascontiguousarray(mids.reshape(-1, 3))
         first, inv = unique_rows(flat.view(np.int64))
-        uniq = flat[first]
+        uniq = flat.take(first, axis=0)
         uhint = f.reshape(-1)[first]  # the triangle near the edge's first corner (ab: a, ...)
         urad = np.full(uniq.shape[0], np.inf)
         np.minimum.at(urad, inv, rad.reshape(-1))
@@ -570,10 +570,10 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
             keys = _triangle_keys(tri, n)
             pos = np.searchsorted(dst_keys, keys)
             pos = np.minimum(pos, dst_keys.shape[0] - 1)
-            tri = tri[(dst_keys[pos] != keys) if same is None else
-                      (dst_keys[pos] != keys) | ~same[tri].all(axis=1)]
+            tri = tri.take(np.flatnonzero((dst_keys[pos] != keys) if same is None else
+                                          (dst_keys[pos] != keys) | ~same[tri].all(axis=1)), axis=0)
     qi = np.flatnonzero(ask)
-    pts = np.concatenate([src.positions[qi], samples])
+    pts = np.concatenate([src.positions.take(qi, axis=0), samples])
     dq, fq = dst.engine.query(pts)
     d_vert[qi], f_vert[qi] = dq[:qi.shape[0]], fq[:qi.shape[0]]
     ds = dq[qi.shape[0]:]
@@ -581,7 +581,8 @@ def _direction(src: _Side, dst: _Side, shared: np.ndarray | None, samples: np.nd
     own = float(dq.max()) if dq.size else 0.0
     if tri.shape[0] == 0:
         return _Direction(upper=own, lower=own), mean_sq
-    v = src.positions[tri]
+    # (take: numpy's row gather, 3-4x faster here than fancy indexing, the same values)
+    v = np.take(src.positions, tri, axis=0)
     res = _bound_direction(v, d_vert[tri], f_vert[tri], dst, own, max(own, lower), tolerance, work)
     res.queries += pts.shape[0]
     return res, mean_sq
