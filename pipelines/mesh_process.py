@@ -266,19 +266,34 @@ def drop_duplicate_triangles(tris: np.ndarray, drop_reversed: bool = False) -> t
     return tris[keep], int(m - keep.size)
 
 
+def _doubled_areas(local: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(M,) float64 ``|(b - a) x (c - a)|`` of triangles ``tris`` (M, 3) over ``local`` (N, 3)
+    float64: the values of ``sqrt(einsum("ij,ij->i", x, x))`` of ``x = np.cross(b - a, c - a)``,
+    operation for operation (``np.cross``'s three differences of products; the squares summed
+    ``(x0 x0 + x2 x2) + x1 x1``, the order numpy 2.4's einsum adds three terms in here), with
+    row gathers by ``take`` and no (M, 3) temporaries beyond the corners (2-3x faster)."""
+    a = local.take(tris[:, 0], axis=0)
+    u = local.take(tris[:, 1], axis=0)
+    w = local.take(tris[:, 2], axis=0)
+    u -= a
+    w -= a
+    x = u[:, 1] * w[:, 2] - u[:, 2] * w[:, 1]
+    y = u[:, 2] * w[:, 0] - u[:, 0] * w[:, 2]
+    z = u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+    return np.sqrt((x * x + z * z) + y * y)
+
+
 def _zero_area(pos: np.ndarray, tris: np.ndarray, tolerance: float) -> np.ndarray:
     """(M,) bool: triangles whose area is zero relative to the mesh's size (float64, centred)."""
     if tris.shape[0] == 0:
         return np.zeros(0, dtype=bool)
     mask = np.zeros(pos.shape[0], dtype=bool)
     mask[tris.reshape(-1)] = True
-    used = pos[mask]  # the referenced vertices: the size of what is drawn
+    used = pos.take(np.flatnonzero(mask), axis=0)  # the referenced vertices: the size of what is drawn
     lo, hi = column_bounds(used)
-    local = pos - (lo + hi) * 0.5
+    centre = (lo + hi) * 0.5
     diag2 = float(np.sum((hi - lo) ** 2))
-    a, b, c = local[tris[:, 0]], local[tris[:, 1]], local[tris[:, 2]]
-    cross = np.cross(b - a, c - a)
-    area2 = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    area2 = _doubled_areas(pos - centre, tris)
     if diag2 == 0.0:
         return np.ones(tris.shape[0], dtype=bool)
     return area2 <= tolerance * diag2

@@ -96,6 +96,25 @@ def test_weld_compares_every_kept_attribute():
 
 # -- degenerate triangles --------------------------------------------------------------------
 
+def test_doubled_areas_are_the_cross_and_einsum_values_bit_for_bit():
+    """The degenerate test's areas, computed without np.cross's temporaries, are the values it
+    computed before, from tiny to huge coordinates and on flat meshes (exactly zero areas)."""
+    from assetpipe.pipelines.mesh_process import _doubled_areas
+
+    rng = np.random.default_rng(4)
+    for t in range(120):
+        n = int(rng.integers(3, 1500))
+        scale = 10.0 ** rng.uniform(-6, 8)
+        pos = (rng.standard_normal((n, 3)) * scale).astype(np.float32).astype(np.float64)
+        if t % 4 == 0:
+            pos[:, 2] = pos[:, 0] * 0.5
+        tris = rng.integers(0, n, (int(rng.integers(1, 2000)), 3))
+        local = pos - pos.mean(axis=0)
+        a, b, c = local[tris[:, 0]], local[tris[:, 1]], local[tris[:, 2]]
+        cross = np.cross(b - a, c - a)
+        assert np.array_equal(_doubled_areas(local, tris), np.sqrt(np.einsum("ij,ij->i", cross, cross))), t
+
+
 def test_degenerates_dropped_and_counted_but_a_thin_sliver_is_kept():
     pos = [[0, 0, 0], [1, 0, 0], [0, 1, 0],  # a real triangle (sets the mesh size ~1)
            [2, 0, 0], [3, 0, 0], [4, 0, 0],  # collinear: zero area, distinct indices
