@@ -402,3 +402,25 @@ def test_a_nan_cell_bound_settles_nothing_and_counts_as_unbounded():
     settled, live_ub, live = _settle(ub, 1.0, 0.0, np.arange(4))
     assert settled == 0.5 and live.tolist() == [1, 2]
     assert _largest(live_ub) == np.inf and _largest(np.array([0.25, 3.0])) == 3.0
+
+
+def test_distinct_rows_groups_rows_bit_for_bit_in_first_occurrence_order():
+    """The split's midpoint dedupe: the same groups as a sort of the rows' bits (-0.0 apart from
+    0.0, as the bits are), numbered in order of first occurrence, each with its first index."""
+    from assetpipe.core.rows import unique_rows
+    from assetpipe.pipelines.surface_error import _distinct_rows
+
+    rng = np.random.default_rng(1)
+    for n in (1, 5, 400, 20000):
+        base = rng.standard_normal((max(1, n // 3), 3))
+        rows = np.ascontiguousarray(base[rng.integers(0, base.shape[0], n)])
+        rows[::5, 0] = -0.0
+        rows[1::5, 0] = 0.0
+        ids, first = _distinct_rows(rows)
+        f_sorted, ids_sorted = unique_rows(rows.view(np.int64))
+        assert first.size == f_sorted.size and np.array_equal(np.sort(first), np.sort(f_sorted))
+        assert np.array_equal(ids[f_sorted][ids_sorted], ids)  # the same partition
+        assert np.array_equal(ids[first], np.arange(first.size))  # numbered by first occurrence
+        assert np.all(np.diff(first) > 0)
+    ids, first = _distinct_rows(np.zeros((0, 3)))
+    assert ids.size == 0 and first.size == 0
