@@ -86,31 +86,12 @@ _PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # samples per pixel by colour ty
 _PNG_DEPTHS = {0: (1, 2, 4, 8, 16), 2: (8, 16), 3: (1, 2, 4, 8), 4: (8, 16), 6: (8, 16)}
 
 
-#: an 8-bit PNG whose pixels take at most this much memory, and whose file could hold them
-#: (:func:`_stream_could_hold`), is handed to Pillow after its header and CRC checks, its pixel
-#: stream inflated only if Pillow fails on it (for the precise error): a good image is then
-#: inflated once, not twice (the corpus's 21 PNGs: 0.11 s of zlib less). Any other claim is
-#: inflated first, so a few bytes claiming a large image never allocate it.
-LAZY_STREAM_BYTES = 64 << 20
-#: deflate's largest expansion: 258 bytes from a match code of about two bits, 1032:1
-_DEFLATE_MAX_RATIO = 1032
-
-
-def _stream_could_hold(data: bytes, width: int, height: int, depth: int, colour: int) -> bool:
-    """Whether a PNG file of ``len(data)`` bytes could inflate to the rows its header claims
-    (a filter byte a row and the row's samples): deflate expands at most 1032 times, so a file
-    that could not is certainly short or forged, and is checked before any allocation."""
-    row = 1 + (width * depth * _PNG_CHANNELS.get(colour, 4) + 7) // 8
-    return height * row <= _DEFLATE_MAX_RATIO * len(data)
-
-
-def _check_png_stream(image: ImageSource, inflate: bool = True) -> None:
+def _check_png_stream(image: ImageSource) -> None:
     """Check a PNG's chunks (CRCs) and pixel stream (inflates to exactly the size its header
     implies) before a decoder sees it. A header claiming 16384^2 pixels over a few bytes of
     data is refused without allocating the image (Pillow allocates first), and libpng never
     prints its complaints about a broken file to stderr beside our one-line error. Inflates in
-    1 MiB pieces, so the check keeps no more than that. ``inflate=False``: the header and the
-    chunks' CRCs only (:data:`LAZY_STREAM_BYTES`), unless a chunk is cut short (then all of it)."""
+    1 MiB pieces, so the check keeps no more than that."""
     import zlib
 
     data = image.data
@@ -120,19 +101,16 @@ def _check_png_stream(image: ImageSource, inflate: bool = True) -> None:
         raise InvalidTextureError(_where(image), f"image {image.name!r} has an invalid PNG header "
                                                  f"(bit depth {depth}, colour type {colour})")
     pos, inflater, inflated = 8, zlib.decompressobj(), 0
-    view = memoryview(data)  # chunk bodies without copies
     try:
         while pos + 12 <= len(data):
             length, kind = struct.unpack(">I4s", data[pos:pos + 8])
-            body = view[pos + 8:pos + 8 + length]
+            body = data[pos + 8:pos + 8 + length]
             if len(body) != length or pos + 12 + length > len(data):
-                if not inflate:  # a cut chunk: whether its pixel data is all there is decided
-                    return _check_png_stream(image)  # as before (Pillow would read what is left)
                 break
             crc = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])[0]
-            if zlib.crc32(body, zlib.crc32(kind)) != crc:
+            if zlib.crc32(kind + body) != crc:
                 raise InvalidTextureError(_where(image), f"image {image.name!r} has a corrupt {kind!r} chunk (CRC)")
-            if kind == b"IDAT" and inflate:
+            if kind == b"IDAT":
                 chunk = inflater.decompress(body, 1 << 20)
                 while True:
                     inflated += len(chunk)
@@ -144,8 +122,6 @@ def _check_png_stream(image: ImageSource, inflate: bool = True) -> None:
             pos += 12 + length
     except zlib.error as exc:
         raise InvalidTextureError(_where(image), f"image {image.name!r} is a corrupt PNG ({exc})") from None
-    if not inflate:
-        return
     bits = depth * _PNG_CHANNELS[colour]  # per pixel
     if interlace:  # Adam7: seven passes, each of its own rows and columns
         passes = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2))
@@ -209,14 +185,9 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
     """
     data = image.data
     ihdr = _png_ihdr(data)
-    lazy = False
     if ihdr is not None:
         _check_size(image, ihdr[0], ihdr[1], max_pixels, 2 if ihdr[2] == 16 else 1)
-        # 16-bit PNGs go to OpenCV (libpng, which prints to stderr on a broken stream): checked
-        # whole first, as are claims too large to allocate on trust
-        lazy = (ihdr[2] != 16 and ihdr[0] * ihdr[1] * 4 <= LAZY_STREAM_BYTES
-                and _stream_could_hold(data, *ihdr))
-        _check_png_stream(image, inflate=not lazy)
+        _check_png_stream(image)
         if ihdr[2] == 16:
             return _decode_png16(image, max_pixels)
     formats = _PIL_FORMAT_HINT.get(image.mime)
@@ -245,8 +216,6 @@ def decode_image(image: ImageSource, max_pixels: int = DEFAULT_MAX_PIXELS) -> np
         raise InvalidTextureError(_where(image), f"image {image.name!r} is too large: {exc}") from None
     except (OSError, ValueError, SyntaxError, EOFError, struct.error, IndexError, TypeError,
             MemoryError, Image.UnidentifiedImageError) as exc:
-        if lazy:
-            _check_png_stream(image)  # a broken or short pixel stream: its own, precise error
         problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InvalidTextureError(_where(image), f"image {image.name!r} cannot be decoded: {problem}") from None
     return rgba

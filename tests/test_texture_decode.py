@@ -350,29 +350,3 @@ def test_rgb_and_grey_widen_to_rgba_exactly_as_pillow_converts(mode, key):
     assert np.array_equal(got, np.asarray(im.convert("RGBA")))
     if key is not None:
         assert (got[..., 3] == 0).any()  # the key made some texels transparent
-
-
-def test_a_good_png_decodes_the_same_with_its_stream_checked_first_or_only_on_failure(monkeypatch):
-    """An 8-bit PNG within LAZY_STREAM_BYTES is handed to Pillow after its header and CRC checks
-    (its stream inflated only if Pillow fails): the same pixels as with the whole check first,
-    for every colour type, interlaced or not; and a file too small to hold what its header claims
-    is still inflated first (refused before any allocation, above)."""
-    from assetpipe.pipelines import texture_decode as td
-
-    rng = np.random.default_rng(2)
-    images = [Image.fromarray((rng.random((37, 23, 4)) * 255).astype(np.uint8), "RGBA"),
-              Image.fromarray((rng.random((16, 40, 3)) * 255).astype(np.uint8), "RGB"),
-              Image.fromarray((rng.random((9, 9)) * 255).astype(np.uint8), "L"),
-              Image.fromarray((rng.random((20, 12, 3)) * 255).astype(np.uint8), "RGB").convert("P")]
-    for im in images:
-        for interlace in (0, 1):
-            buf = io.BytesIO()
-            im.save(buf, "PNG", interlace=interlace)
-            data = buf.getvalue()
-            monkeypatch.setattr(td, "LAZY_STREAM_BYTES", 64 << 20)
-            lazy = decode_image(source(data))
-            monkeypatch.setattr(td, "LAZY_STREAM_BYTES", 0)
-            checked = decode_image(source(data))
-            assert lazy.dtype == checked.dtype and np.array_equal(lazy, checked)
-    assert not td._stream_could_hold(b"x" * 1000, 4096, 4096, 8, 6)
-    assert td._stream_could_hold(b"x" * 100_000, 512, 512, 8, 6)
