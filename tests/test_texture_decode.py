@@ -350,3 +350,12 @@ def test_rgb_and_grey_widen_to_rgba_exactly_as_pillow_converts(mode, key):
     assert np.array_equal(got, np.asarray(im.convert("RGBA")))
     if key is not None:
         assert (got[..., 3] == 0).any()  # the key made some texels transparent
+
+
+def test_a_small_png_whose_stream_ends_cleanly_but_short_is_refused():
+    """A complete zlib stream holding 8 of the 64 rows its header claims: Pillow would decode it
+    without a word (the missing rows black), so the stream is inflated and measured first, for a
+    small image too (not only for a claim a file could not back)."""
+    data = raw_png(64, 64, 8, 6, bytes(8 * (1 + 64 * 4)))
+    with pytest.raises(InvalidTextureError, match=r"corrupt or truncated PNG \(its pixel data holds 2056 of 16448 bytes\)"):
+        decode_image(source(data))
