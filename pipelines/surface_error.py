@@ -51,7 +51,7 @@ from typing import Sequence
 import numpy as np
 
 from assetpipe.core.cores import map_spare
-from assetpipe.core.rows import column_bounds, edge_runs, position_ids
+from assetpipe.core.rows import column_bounds, edge_runs
 from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
@@ -297,7 +297,7 @@ class _Side:
     def weld(self) -> np.ndarray:
         """(N,) int64: one id per distinct position (equal ids: equal positions)."""
         if self._weld is None:
-            self._weld = position_ids(self.positions)
+            self._weld = _position_groups(self.positions)
         return self._weld
 
     @property
@@ -331,6 +331,15 @@ class _Direction:
     lower: float = 0.0       # the largest distance evaluated in this direction
     converged: bool = True
     queries: int = 0
+
+
+def _position_groups(positions: np.ndarray) -> np.ndarray:
+    """(N,) int64: one id per distinct position of (N, 3) float64 ``positions``, the grouping of
+    :func:`assetpipe.core.rows.position_ids` (-0.0 equal to 0.0; a NaN row grouped by its bits)
+    by meshoptimizer's hash instead of a lexsort (5-8x faster), numbered in first-occurrence
+    order instead of sorted order: the bound only compares these ids (shared vertices, edges)."""
+    p = np.ascontiguousarray(np.asarray(positions, np.float64) + 0.0)  # + 0.0: -0.0 -> 0.0
+    return _distinct_rows(p)[0]
 
 
 def _distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

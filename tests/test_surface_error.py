@@ -424,3 +424,21 @@ def test_distinct_rows_groups_rows_bit_for_bit_in_first_occurrence_order():
         assert np.all(np.diff(first) > 0)
     ids, first = _distinct_rows(np.zeros((0, 3)))
     assert ids.size == 0 and first.size == 0
+
+
+def test_position_groups_partition_positions_as_position_ids_does():
+    """The bound's weld: the same groups as core.rows.position_ids (-0.0 with 0.0, NaN rows by
+    their bits), numbered in first-occurrence order (the bound only compares the ids)."""
+    from assetpipe.core.rows import position_ids
+    from assetpipe.pipelines.surface_error import _position_groups
+
+    rng = np.random.default_rng(3)
+    for n in (1, 7, 600, 9000):
+        base = rng.standard_normal((max(1, n // 3), 3))
+        p = base[rng.integers(0, base.shape[0], n)].copy()
+        p[::7, 1] = -0.0
+        p[1::7, 1] = 0.0
+        p[rng.integers(0, n, 1), 0] = np.nan
+        want, got = position_ids(p), _position_groups(p)
+        first = np.unique(want, return_index=True)[1]
+        assert np.array_equal(got[first][want], got) and np.unique(got).size == first.size
