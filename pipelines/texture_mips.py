@@ -400,9 +400,23 @@ def _linear_means(levels8: list[np.ndarray], srgb: bool, mean0: np.ndarray | Non
             means.append(mean0)
             continue
         n = lv.shape[0] * lv.shape[1]
-        m = [float(cv2.calcHist([lv], [c], None, [256], [0, 256]).reshape(-1) @ tables[c]) / n for c in range(4)]
+        hist = _channel_histograms(lv).astype(np.float64)
+        m = [float(hist[c] @ tables[c]) / n for c in range(4)]
         means.append(np.asarray(m))
     return means
+
+
+@njit(cache=True, nogil=True)
+def _channel_histograms(lv):
+    """(4, 256) int64: the 256-bin histogram of each channel of (H, W, 4) uint8 ``lv``, in one
+    pass (OpenCV's calcHist took one call a channel, 4-20x this on the small levels of a chain,
+    1.2-1.5x on the large; its float32 counts are exact below 2^24 a bin, these at any size)."""
+    h = np.zeros((4, 256), np.int64)
+    for y in range(lv.shape[0]):
+        for x in range(lv.shape[1]):
+            for c in range(4):
+                h[c, lv[y, x, c]] += 1
+    return h
 
 
 def _premultiplied_means(levels8: list[np.ndarray], srgb: bool) -> list[np.ndarray]:

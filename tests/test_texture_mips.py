@@ -507,3 +507,20 @@ def test_the_linear_16_to_8_table_equals_the_opencv_conversion():
 
     x = np.arange(65536, dtype=np.uint16)
     assert np.array_equal(tm._LIN8_FROM_LIN16, tm._u16_to_u8(x).reshape(-1))
+
+
+def test_channel_histograms_count_as_opencv_does():
+    """The mean-drift histograms, one pass for the four channels: OpenCV's calcHist counts for
+    each channel (any size, a strided view too)."""
+    import cv2
+
+    from assetpipe.pipelines.texture_mips import _channel_histograms
+
+    rng = np.random.default_rng(1)
+    for h, w in ((1, 1), (3, 17), (200, 203), (64, 512)):
+        lv = (rng.random((h, w, 4)) * 255).astype(np.uint8)
+        for view in (lv, lv[:, ::2]):
+            got = _channel_histograms(view)
+            for c in range(4):
+                want = cv2.calcHist([np.ascontiguousarray(view)], [c], None, [256], [0, 256]).reshape(-1)
+                assert np.array_equal(got[c], want.astype(np.int64))
