@@ -31,7 +31,7 @@ from typing import Hashable, Sequence
 import numpy as np
 
 from assetpipe.core.cores import map_spare
-from assetpipe.core.rows import column_bounds, first_occurrences, first_use_order
+from assetpipe.core.rows import column_bounds, first_use_order, unique_first
 from assetpipe.pipelines import simplify as simp
 from assetpipe.pipelines.lod import LodChain, LodLevel, build_lod_chain, reorder_for_lod_prefix
 from assetpipe.pipelines.lod_options import DEFAULT_LOD_OPTIONS, LodOptions
@@ -119,7 +119,7 @@ def dedupe_triangles(indices: np.ndarray, positions: np.ndarray, double_sided: b
                 | (k[:, 2].astype(np.uint64) << np.uint64(1)))
         if not double_sided:
             code |= parity[live].astype(np.uint64)
-        first = first_occurrences(code)
+        first = unique_first(code)[1]
     else:
         rows = k if double_sided else np.concatenate([k, parity[live, None]], axis=1)
         _, first = np.unique(rows, axis=0, return_index=True)

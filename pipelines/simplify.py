@@ -406,6 +406,17 @@ def vertex_remap(packed: np.ndarray, indices: np.ndarray | None = None) -> tuple
     return remap, int(unique)
 
 
+def distinct_records(packed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Records of ``packed`` (N, B) uint8 that are equal byte for byte, grouped by
+    :func:`vertex_remap` (a hash, no sort): (the id of each record's group (N,) uint32, numbered
+    in order of first occurrence; the index of each group's first record (U,) int64, increasing)."""
+    remap, _ = vertex_remap(packed)
+    if remap.size == 0:
+        return remap, np.zeros(0, np.int64)
+    top = np.maximum.accumulate(remap)  # ids are handed out in vertex order: a new one is a new maximum
+    return remap, np.flatnonzero(np.r_[True, top[1:] > top[:-1]])
+
+
 def simplifier_names() -> tuple[str, ...]:
     """The simplifier names :mod:`pipelines.lod` accepts."""
     return ("meshopt", "meshopt-attr", "meshopt-sloppy", "fast-simplification")

@@ -56,7 +56,7 @@ from assetpipe.pipelines.closest_point import ClosestTriangles
 from assetpipe.pipelines.distance_kernels import (
     area_cumsum, area_samples, convex_bound, near_bounds, pair_bound)
 from assetpipe.pipelines.patch_bound import patch_bound_seeded
-from assetpipe.pipelines.simplify import vertex_remap
+from assetpipe.pipelines.simplify import distinct_records
 
 DEFAULT_SAMPLES = 50_000
 DEFAULT_SEED = 0
@@ -346,12 +346,7 @@ def _distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the id of each row's distinct row (R,) int64, numbered in order of first occurrence;
     the index of each distinct row's first occurrence (U,) int64) of C-contiguous (R, 3)
     float64 rows, compared bit for bit (meshoptimizer's vertex remap over their bytes)."""
-    n = rows.shape[0]
-    if n == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    remap, _ = vertex_remap(rows.view(np.uint8).reshape(n, -1))
-    top = np.maximum.accumulate(remap)
-    first = np.flatnonzero(np.r_[True, top[1:] > top[:-1]])
+    remap, first = distinct_records(rows.view(np.uint8).reshape(rows.shape[0], rows.shape[1] * rows.itemsize))
     return remap.astype(np.int64), first
 
 

@@ -54,22 +54,22 @@ def test_edge_runs_group_each_undirected_edge_once():
     assert edge_runs(np.zeros((0, 3), int))[3].size == 0
 
 
-def test_stable_argsort_and_first_occurrences_are_numpys_stable_results():
+def test_stable_argsort_and_unique_first_are_numpys_stable_results():
     """The faster sorts give numpy's own stable answers: equal keys in index order, and per
     distinct key its lowest index (what ``np.unique(return_index=True)`` gives), on keys with
     many repeats, few repeats, one value, and uint64 keys using all 64 bits."""
-    from assetpipe.core.rows import first_occurrences, stable_argsort
+    from assetpipe.core.rows import stable_argsort, unique_first
 
     rng = np.random.default_rng(5)
     for n, top in ((1, 1), (7, 1), (500, 3), (3000, 3000), (20000, 50)):
         k = rng.integers(0, top, n).astype(np.int64)
         np.testing.assert_array_equal(stable_argsort(k, top), np.argsort(k, kind="stable"))
         np.testing.assert_array_equal(stable_argsort(k, 1 << 62), np.argsort(k, kind="stable"))  # no room: stable sort
-        np.testing.assert_array_equal(first_occurrences(k), np.unique(k, return_index=True)[1])
+        np.testing.assert_array_equal(unique_first(k)[1], np.unique(k, return_index=True)[1])
     wide = rng.integers(0, 2**63 - 1, 4000, dtype=np.int64).astype(np.uint64) * np.uint64(2)
     wide = wide[rng.integers(0, 4000, 9000)]
-    np.testing.assert_array_equal(first_occurrences(wide), np.unique(wide, return_index=True)[1])
-    assert first_occurrences(np.zeros(0, np.uint64)).size == 0
+    np.testing.assert_array_equal(unique_first(wide)[1], np.unique(wide, return_index=True)[1])
+    assert unique_first(np.zeros(0, np.uint64))[1].size == 0
 
 
 def test_unique_first_and_first_use_order_are_numpys_answers():

@@ -80,11 +80,6 @@ def unique_first(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s[starts], np.minimum.reduceat(order, starts).astype(np.int64)
 
 
-def first_occurrences(key: np.ndarray) -> np.ndarray:
-    """``np.unique(key, return_index=True)[1]``: :func:`unique_first`'s indices."""
-    return unique_first(key)[1]
-
-
 def first_use_order(key: np.ndarray) -> np.ndarray:
     """The distinct values of (R,) integer ``key`` in order of first appearance (``np.unique``
     with ``return_index``, then the values sorted by their first index)."""
