@@ -726,7 +726,7 @@ def reorder_for_lod_prefix(levels: Sequence[np.ndarray], vertex_count: int) -> L
     group = np.where(unref, -1, level_of)
     # (one default sort of a combined key where it fits: distinct values, the same order as the
     # lexsort's three stable passes)
-    top = int(max((int(first_use[~unref].max()) + 1) if (~unref).any() else 1, 1))
+    top = int(first_use[~unref].max()) + 1 if (~unref).any() else 1  # first uses are < top
     span = len(levels) + 2
     if n and span * (top + 1) * n < (1 << 62):
         fu = np.where(unref, top, first_use)

@@ -273,7 +273,6 @@ def _to_rgba(im: Image.Image) -> np.ndarray:
     return out
 
 
-
 def image_size(image: ImageSource) -> tuple[int, int] | None:
     """``(width, height)`` read from the image's header, without decoding a pixel; ``None`` when
     the header cannot be read (:func:`decode_image` then says what is wrong)."""
